@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Installs what mfd needs on a fresh Debian/Ubuntu machine, and nothing that
+# is already there. Sourced by demo.sh and test.sh; safe to run by hand.
+set -euo pipefail
+
+# Debian packages: a C toolchain and pkg-config for -sys crates.
+# Later stages add their own (libaravis-dev, xvfb, mesa-vulkan-drivers, ...).
+packages=(build-essential pkg-config)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "installing: ${missing[*]}"
+  sudo_cmd=""
+  [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+  $sudo_cmd apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${missing[@]}"
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  [ -f "$HOME/.cargo/env" ] && . "$HOME/.cargo/env"
+fi
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "error: no Rust toolchain (cargo) on PATH. Install one with rustup (https://rustup.rs)," >&2
+  echo "       or your distribution's cargo >= 1.85, then run this script again." >&2
+  exit 1
+fi
+for c in rustfmt clippy; do
+  if ! cargo "$( [ $c = rustfmt ] && echo fmt || echo clippy )" --version >/dev/null 2>&1; then
+    if command -v rustup >/dev/null 2>&1; then rustup component add "$c"; else
+      echo "error: cargo $c missing and no rustup to add it" >&2; exit 1; fi
+  fi
+done

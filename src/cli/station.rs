@@ -1,0 +1,78 @@
+//! `mfd station`: build a station file from hardware profiles.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use nalgebra::Point2;
+
+use mfd::station::{CameraProfile, DisplayProfile, Element, SymmetricLayout};
+
+/// Arguments of `mfd station`.
+#[derive(Args)]
+pub struct StationArgs {
+    /// Camera profile (hw/camera/*.toml).
+    #[arg(long, default_value = "hw/camera/baumer-txg12.toml")]
+    camera: PathBuf,
+    /// Display profile (hw/display/*.toml).
+    #[arg(long, default_value = "hw/display/mtiph-e2m21gm.toml")]
+    display: PathBuf,
+    /// Lens focal length, mm.
+    #[arg(long, default_value_t = 16.0)]
+    focal_length_mm: f64,
+    /// Height of the camera's projection centre above the element, mm.
+    #[arg(long, default_value_t = 825.0)]
+    camera_height_mm: f64,
+    /// Height of the screen above the element, mm.
+    #[arg(long, default_value_t = 825.0)]
+    screen_height_mm: f64,
+    /// Angle between the camera's axis and the element's normal, degrees
+    /// (in the x–z plane; the screen sits at the mirror angle).
+    #[arg(long, default_value_t = 15.0)]
+    tilt_deg: f64,
+    /// Refractive index of the element.
+    #[arg(long, default_value_t = 1.5)]
+    refractive_index: f64,
+    /// Element thickness, mm.
+    #[arg(long, default_value_t = 10.0)]
+    thickness_mm: f64,
+    /// Radius of the measured aperture, mm.
+    #[arg(long, default_value_t = 25.5)]
+    aperture_radius_mm: f64,
+    /// Where to write the station.toml.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// Runs `mfd station`.
+pub fn run(args: &StationArgs) -> anyhow::Result<()> {
+    let camera = CameraProfile::load(&args.camera)?;
+    let display = DisplayProfile::load(&args.display)?;
+    let layout = SymmetricLayout {
+        camera_height_mm: args.camera_height_mm,
+        screen_height_mm: args.screen_height_mm,
+        tilt_deg: args.tilt_deg,
+        focal_length_mm: args.focal_length_mm,
+        element: Element {
+            refractive_index: args.refractive_index,
+            thickness_mm: args.thickness_mm,
+            aperture_radius_mm: args.aperture_radius_mm,
+            aperture_center_mm: Point2::origin(),
+        },
+    };
+    let station = layout.build(&camera, &display)?;
+    let header = format!(
+        "# Built by `mfd station` from {} and {}:\n# camera {} mm and screen {} mm above the \
+         element, axis {}° from the normal, f = {} mm.\n",
+        args.camera.display(),
+        args.display.display(),
+        args.camera_height_mm,
+        args.screen_height_mm,
+        args.tilt_deg,
+        args.focal_length_mm
+    );
+    std::fs::write(&args.out, header + &station.to_toml_string())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

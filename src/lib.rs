@@ -1,0 +1,20 @@
+//! mfd: multi-frequency fringe deflectometry of both faces of transparent
+//! planar optics.
+//!
+//! Data flows one way: [`station`] and [`patterns`] describe the instrument,
+//! [`trace`] is the exact forward model, [`sim`] renders what the camera sees,
+//! [`acquisition`] reads and writes recorded frames, and [`surfaces_file`] /
+//! [`npy`] hold the results. [`conventions`] states frames, units and orderings.
+#![warn(missing_docs)]
+
+pub mod acquisition;
+pub mod conventions;
+pub mod image_io;
+pub mod npy;
+pub mod optics;
+pub mod patterns;
+pub mod sim;
+pub mod station;
+pub mod surfaces_file;
+pub mod trace;
+pub mod zernike;

@@ -1,0 +1,48 @@
+//! `mfd`: the command line. All logic lives in the library; this file only
+//! parses arguments, calls it and prints what happened.
+
+mod cli;
+
+use clap::{Parser, Subcommand};
+
+/// Multi-frequency fringe deflectometry of both faces of transparent plates.
+///
+/// Lengths are millimetres, angles degrees, surface heights and Zernike
+/// coefficients nanometres (Noll order, RMS-normalised). File formats follow
+/// the interchange spec: station.toml (mfd-station/1), acquisition folders
+/// (mfd-acquisition/1), surfaces.json (mfd-surfaces/1), screen_coords.npy.
+#[derive(Parser)]
+#[command(name = "mfd", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Trace the station: where every camera pixel's rays land on the screen.
+    Trace(cli::trace::TraceArgs),
+    /// Render a simulated acquisition of a station and scene, with its truth.
+    Simulate(cli::simulate::SimulateArgs),
+    /// Build a station.toml from camera and display profiles and the paper's layout.
+    Station(cli::station::StationArgs),
+    /// Benchmarks: print figures as one JSON line.
+    Bench(cli::bench::BenchArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Trace(args) => cli::trace::run(&args),
+        Command::Simulate(args) => cli::simulate::run(&args),
+        Command::Station(args) => cli::station::run(&args),
+        Command::Bench(args) => cli::bench::run(&args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,574 @@
+//! NumPy `.npy` files (format 1.0 written; 1.0–3.0 read): little-endian,
+//! C order, dtypes `|u1`, `<u2`, `<f8` and `|b1`. Stacks of camera frames
+//! are written and read one frame at a time, never whole.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+const MAGIC: &[u8] = b"\x93NUMPY";
+
+/// What went wrong with an NPY file.
+#[derive(Debug, thiserror::Error)]
+pub enum NpyError {
+    /// The file could not be opened, read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The header is not an NPY header we can read.
+    #[error("{path}: not a readable .npy file: {problem}")]
+    Header {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The dtype or shape is not what the caller needs.
+    #[error("{path}: expected {expected}, found {found}")]
+    Unexpected {
+        /// The file.
+        path: PathBuf,
+        /// What was expected.
+        expected: String,
+        /// What the file holds.
+        found: String,
+    },
+    /// The data ends early.
+    #[error("{path}: truncated: holds {complete} complete frames of {expected}")]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Frames (or elements, for plain arrays) present in full.
+        complete: usize,
+        /// Frames (or elements) the header announces.
+        expected: usize,
+    },
+    /// A frame index beyond the stack.
+    #[error("{path}: frame {frame} requested, the stack holds {frames}")]
+    NoSuchFrame {
+        /// The file.
+        path: PathBuf,
+        /// Requested frame.
+        frame: usize,
+        /// Frames in the stack.
+        frames: usize,
+    },
+}
+
+/// Element types of camera frame stacks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StackDtype {
+    /// `|u1`.
+    U8,
+    /// `<u2`.
+    U16,
+}
+
+impl StackDtype {
+    fn descr(self) -> &'static str {
+        match self {
+            StackDtype::U8 => "|u1",
+            StackDtype::U16 => "<u2",
+        }
+    }
+
+    fn size(self) -> usize {
+        match self {
+            StackDtype::U8 => 1,
+            StackDtype::U16 => 2,
+        }
+    }
+}
+
+/// A parsed header.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Header {
+    /// dtype descriptor, e.g. `<f8`.
+    pub descr: String,
+    /// Array shape.
+    pub shape: Vec<usize>,
+    /// Byte offset of the data.
+    pub data_offset: u64,
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> NpyError + '_ {
+    move |source| NpyError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn header_bytes(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let shape_txt = match dims.len() {
+        1 => format!("({},)", dims[0]),
+        _ => format!("({})", dims.join(", ")),
+    };
+    let mut dict =
+        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_txt}, }}");
+    // Pad with spaces so magic + version + length + dict + '\n' is a multiple of 64.
+    let total = MAGIC.len() + 2 + 2 + dict.len() + 1;
+    dict.push_str(&" ".repeat((64 - total % 64) % 64));
+    dict.push('\n');
+    let mut out = MAGIC.to_vec();
+    out.extend([1u8, 0u8]);
+    out.extend((dict.len() as u16).to_le_bytes());
+    out.extend(dict.as_bytes());
+    out
+}
+
+/// Reads and parses the header of an open NPY file.
+fn read_header(path: &Path, r: &mut impl Read) -> Result<Header, NpyError> {
+    let bad = |problem: String| NpyError::Header {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let mut pre = [0u8; 8];
+    r.read_exact(&mut pre)
+        .map_err(|_| bad("shorter than the magic string".into()))?;
+    if &pre[..6] != MAGIC {
+        return Err(bad("bad magic string (not \\x93NUMPY)".into()));
+    }
+    let (len, prefix) = match pre[6] {
+        1 => {
+            let mut b = [0u8; 2];
+            r.read_exact(&mut b).map_err(io_err(path))?;
+            (u16::from_le_bytes(b) as usize, 10)
+        }
+        2 | 3 => {
+            let mut b = [0u8; 4];
+            r.read_exact(&mut b).map_err(io_err(path))?;
+            (u32::from_le_bytes(b) as usize, 12)
+        }
+        v => return Err(bad(format!("unsupported format version {v}"))),
+    };
+    let mut dict = vec![0u8; len];
+    r.read_exact(&mut dict)
+        .map_err(|_| bad("header shorter than announced".into()))?;
+    let dict = String::from_utf8_lossy(&dict).to_string();
+    let field = |key: &str| -> Result<String, NpyError> {
+        let at = dict
+            .find(&format!("'{key}'"))
+            .ok_or_else(|| bad(format!("header has no '{key}'")))?;
+        let rest = dict[at + key.len() + 2..]
+            .trim_start()
+            .trim_start_matches(':')
+            .trim_start();
+        Ok(rest.to_string())
+    };
+    let descr_rest = field("descr")?;
+    let descr = descr_rest
+        .trim_start_matches('\'')
+        .split('\'')
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    if field("fortran_order")?.starts_with("True") {
+        return Err(bad(
+            "Fortran order is not supported (expected C order)".into()
+        ));
+    }
+    let shape_rest = field("shape")?;
+    let inner = shape_rest
+        .strip_prefix('(')
+        .and_then(|s| s.split(')').next())
+        .ok_or_else(|| bad(format!("unreadable shape {shape_rest}")))?;
+    let shape = inner
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            s.parse::<usize>()
+                .map_err(|_| bad(format!("unreadable shape ({inner})")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Header {
+        descr,
+        shape,
+        data_offset: (prefix + len) as u64,
+    })
+}
+
+fn open_header(path: &Path) -> Result<(BufReader<File>, Header), NpyError> {
+    let mut r = BufReader::new(File::open(path).map_err(io_err(path))?);
+    let h = read_header(path, &mut r)?;
+    Ok((r, h))
+}
+
+fn read_all(path: &Path, descr: &str, elem: usize) -> Result<(Vec<usize>, Vec<u8>), NpyError> {
+    let (mut r, h) = open_header(path)?;
+    if h.descr != descr {
+        return Err(NpyError::Unexpected {
+            path: path.to_path_buf(),
+            expected: format!("dtype {descr}"),
+            found: format!("dtype {}", h.descr),
+        });
+    }
+    let n: usize = h.shape.iter().product();
+    let mut data = Vec::with_capacity(n * elem);
+    r.read_to_end(&mut data).map_err(io_err(path))?;
+    if data.len() < n * elem {
+        return Err(NpyError::Truncated {
+            path: path.to_path_buf(),
+            complete: data.len() / elem,
+            expected: n,
+        });
+    }
+    data.truncate(n * elem);
+    Ok((h.shape, data))
+}
+
+/// Reads a float64 array: `(shape, values)`.
+///
+/// # Errors
+/// [`NpyError`] naming the file, for I/O, header, dtype or length problems.
+pub fn read_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>), NpyError> {
+    let (shape, bytes) = read_all(path, "<f8", 8)?;
+    let v = bytes
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().expect("8-byte chunk")))
+        .collect();
+    Ok((shape, v))
+}
+
+/// Reads a boolean array: `(shape, values)`.
+///
+/// # Errors
+/// [`NpyError`] naming the file.
+pub fn read_bool(path: &Path) -> Result<(Vec<usize>, Vec<bool>), NpyError> {
+    let (shape, bytes) = read_all(path, "|b1", 1)?;
+    Ok((shape, bytes.into_iter().map(|b| b != 0).collect()))
+}
+
+fn write_raw(path: &Path, descr: &str, shape: &[usize], data: &[u8]) -> Result<(), NpyError> {
+    let mut w = BufWriter::new(File::create(path).map_err(io_err(path))?);
+    w.write_all(&header_bytes(descr, shape))
+        .map_err(io_err(path))?;
+    w.write_all(data).map_err(io_err(path))?;
+    w.flush().map_err(io_err(path))
+}
+
+fn check_shape(path: &Path, shape: &[usize], len: usize) -> Result<(), NpyError> {
+    if shape.iter().product::<usize>() == len {
+        return Ok(());
+    }
+    Err(NpyError::Unexpected {
+        path: path.to_path_buf(),
+        expected: format!(
+            "{} values for shape {shape:?}",
+            shape.iter().product::<usize>()
+        ),
+        found: format!("{len} values"),
+    })
+}
+
+/// Writes a float64 array of `shape` (C order).
+///
+/// # Errors
+/// [`NpyError`] when the shape does not match or the file cannot be written.
+pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<(), NpyError> {
+    check_shape(path, shape, data.len())?;
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    write_raw(path, "<f8", shape, &bytes)
+}
+
+/// Writes a uint8 array of `shape` (C order).
+///
+/// # Errors
+/// [`NpyError`] when the shape does not match or the file cannot be written.
+pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<(), NpyError> {
+    check_shape(path, shape, data.len())?;
+    write_raw(path, "|u1", shape, data)
+}
+
+/// Writes a `[frames, rows, columns]` stack one frame at a time.
+#[derive(Debug)]
+pub struct NpyStackWriter {
+    path: PathBuf,
+    out: BufWriter<File>,
+    dtype: StackDtype,
+    frames: usize,
+    pixels: usize,
+    written: usize,
+}
+
+impl NpyStackWriter {
+    /// Creates the file and writes the header for `frames` frames.
+    ///
+    /// # Errors
+    /// [`NpyError::Io`] when the file cannot be created.
+    pub fn create(
+        path: &Path,
+        dtype: StackDtype,
+        frames: usize,
+        rows: usize,
+        cols: usize,
+    ) -> Result<Self, NpyError> {
+        let mut out = BufWriter::with_capacity(1 << 20, File::create(path).map_err(io_err(path))?);
+        out.write_all(&header_bytes(dtype.descr(), &[frames, rows, cols]))
+            .map_err(io_err(path))?;
+        Ok(NpyStackWriter {
+            path: path.to_path_buf(),
+            out,
+            dtype,
+            frames,
+            pixels: rows * cols,
+            written: 0,
+        })
+    }
+
+    /// Appends the next frame (values above 255 are an error for a u8 stack).
+    ///
+    /// # Errors
+    /// Wrong frame size, too many frames, a u8 overflow, or an I/O failure.
+    pub fn append(&mut self, frame: &[u16]) -> Result<(), NpyError> {
+        let unexpected = |expected: String, found: String| NpyError::Unexpected {
+            path: self.path.clone(),
+            expected,
+            found,
+        };
+        if frame.len() != self.pixels {
+            return Err(unexpected(
+                format!("{} pixels per frame", self.pixels),
+                format!("{}", frame.len()),
+            ));
+        }
+        if self.written == self.frames {
+            return Err(unexpected(
+                format!("{} frames", self.frames),
+                "one more".into(),
+            ));
+        }
+        let bytes: Vec<u8> = match self.dtype {
+            StackDtype::U16 => frame.iter().flat_map(|v| v.to_le_bytes()).collect(),
+            StackDtype::U8 => {
+                if let Some(v) = frame.iter().find(|&&v| v > 255) {
+                    return Err(unexpected("8-bit values".into(), format!("{v}")));
+                }
+                frame.iter().map(|&v| v as u8).collect()
+            }
+        };
+        self.out.write_all(&bytes).map_err(io_err(&self.path))?;
+        self.written += 1;
+        Ok(())
+    }
+
+    /// Flushes the data written so far to the OS (a crash keeps it readable).
+    ///
+    /// # Errors
+    /// [`NpyError::Io`].
+    pub fn flush(&mut self) -> Result<(), NpyError> {
+        self.out.flush().map_err(io_err(&self.path))
+    }
+
+    /// Flushes and checks that every announced frame was written.
+    ///
+    /// # Errors
+    /// [`NpyError::Truncated`] when frames are missing; [`NpyError::Io`].
+    pub fn finish(mut self) -> Result<(), NpyError> {
+        self.flush()?;
+        if self.written != self.frames {
+            return Err(NpyError::Truncated {
+                path: self.path,
+                complete: self.written,
+                expected: self.frames,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Reads frames of a `[frames, rows, columns]` uint8/uint16 stack by seeking.
+#[derive(Debug)]
+pub struct NpyStackReader {
+    path: PathBuf,
+    file: File,
+    dtype: StackDtype,
+    frames: usize,
+    rows: usize,
+    cols: usize,
+    data_offset: u64,
+    complete: usize,
+}
+
+impl NpyStackReader {
+    /// Opens a stack and checks its dtype and shape.
+    ///
+    /// # Errors
+    /// [`NpyError`] for a non-3-D array or another dtype.
+    pub fn open(path: &Path) -> Result<Self, NpyError> {
+        let (_, h) = open_header(path)?;
+        let dtype = match h.descr.as_str() {
+            "|u1" | "<u1" | "u1" => StackDtype::U8,
+            "<u2" => StackDtype::U16,
+            other => {
+                return Err(NpyError::Unexpected {
+                    path: path.to_path_buf(),
+                    expected: "a uint8 or little-endian uint16 stack".into(),
+                    found: format!("dtype {other}"),
+                })
+            }
+        };
+        let [frames, rows, cols] = h.shape[..] else {
+            return Err(NpyError::Unexpected {
+                path: path.to_path_buf(),
+                expected: "shape [frames, rows, columns]".into(),
+                found: format!("shape {:?}", h.shape),
+            });
+        };
+        let file = File::open(path).map_err(io_err(path))?;
+        let len = file.metadata().map_err(io_err(path))?.len();
+        let frame_bytes = (rows * cols * dtype.size()) as u64;
+        let complete = len
+            .saturating_sub(h.data_offset)
+            .checked_div(frame_bytes)
+            .map_or(frames, |c| c.min(frames as u64) as usize);
+        Ok(NpyStackReader {
+            path: path.to_path_buf(),
+            file,
+            dtype,
+            frames,
+            rows,
+            cols,
+            data_offset: h.data_offset,
+            complete,
+        })
+    }
+
+    /// Frames announced by the header.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// Frames present in full in the file (fewer than [`Self::frames`] when truncated).
+    pub fn complete_frames(&self) -> usize {
+        self.complete
+    }
+
+    /// `(rows, columns)` of a frame.
+    pub fn frame_shape(&self) -> (usize, usize) {
+        (self.rows, self.cols)
+    }
+
+    /// Element type.
+    pub fn dtype(&self) -> StackDtype {
+        self.dtype
+    }
+
+    /// Reads frame `index` into `out` (u8 widened to u16).
+    ///
+    /// # Errors
+    /// [`NpyError::NoSuchFrame`], [`NpyError::Truncated`] naming the frame count, or I/O.
+    pub fn read_frame(&mut self, index: usize, out: &mut Vec<u16>) -> Result<(), NpyError> {
+        if index >= self.frames {
+            return Err(NpyError::NoSuchFrame {
+                path: self.path.clone(),
+                frame: index,
+                frames: self.frames,
+            });
+        }
+        if index >= self.complete {
+            return Err(NpyError::Truncated {
+                path: self.path.clone(),
+                complete: self.complete,
+                expected: self.frames,
+            });
+        }
+        let n = self.rows * self.cols;
+        let size = self.dtype.size();
+        let mut bytes = vec![0u8; n * size];
+        self.file
+            .seek(SeekFrom::Start(
+                self.data_offset + (index * n * size) as u64,
+            ))
+            .map_err(io_err(&self.path))?;
+        self.file
+            .read_exact(&mut bytes)
+            .map_err(io_err(&self.path))?;
+        out.clear();
+        match self.dtype {
+            StackDtype::U8 => out.extend(bytes.iter().map(|&b| u16::from(b))),
+            StackDtype::U16 => out.extend(
+                bytes
+                    .chunks_exact(2)
+                    .map(|c| u16::from_le_bytes([c[0], c[1]])),
+            ),
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn header_is_64_byte_aligned() {
+        for shape in [vec![3], vec![48, 48, 2, 2], vec![2000, 966, 1296]] {
+            assert_eq!(header_bytes("<f8", &shape).len() % 64, 0);
+        }
+    }
+
+    #[test]
+    fn stack_round_trip_and_truncation() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.npy");
+        let mut w = NpyStackWriter::create(&p, StackDtype::U16, 3, 2, 3).unwrap();
+        w.append(&[1, 2, 3, 4, 5, 65535]).unwrap();
+        w.append(&[7; 6]).unwrap();
+        let err = w.finish().unwrap_err();
+        assert!(matches!(
+            err,
+            NpyError::Truncated {
+                complete: 2,
+                expected: 3,
+                ..
+            }
+        ));
+        let mut r = NpyStackReader::open(&p).unwrap();
+        assert_eq!((r.frames(), r.complete_frames()), (3, 2));
+        let mut f = Vec::new();
+        r.read_frame(0, &mut f).unwrap();
+        assert_eq!(f, vec![1, 2, 3, 4, 5, 65535]);
+        let err = r.read_frame(2, &mut f).unwrap_err().to_string();
+        assert!(err.contains("2 complete frames of 3"), "{err}");
+    }
+
+    #[test]
+    fn rejects_what_it_cannot_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.npy");
+        std::fs::write(&p, b"NOTNPY....").unwrap();
+        assert!(read_f64(&p).unwrap_err().to_string().contains("magic"));
+        let mut h = header_bytes("<f8", &[2]);
+        let at = h.windows(5).position(|w| w == b"False").unwrap();
+        h[at..at + 5].copy_from_slice(b"True ");
+        std::fs::write(&p, &h).unwrap();
+        assert!(read_f64(&p).unwrap_err().to_string().contains("Fortran"));
+        write_u8(&p, &[2], &[1, 2]).unwrap();
+        let err = read_f64(&p).unwrap_err().to_string();
+        assert!(err.contains("<f8") && err.contains("|u1"), "{err}");
+        std::fs::write(&p, header_bytes(">f8", &[1])).unwrap();
+        assert!(read_f64(&p).is_err());
+    }
+
+    proptest! {
+        #[test]
+        fn f64_round_trip(shape in proptest::collection::vec(1usize..5, 1..5), seed in 0u64..1000) {
+            let n: usize = shape.iter().product();
+            let data: Vec<f64> = (0..n).map(|k| (k as f64 + seed as f64) * 1.37e-3 - 0.5).collect();
+            let dir = tempfile::tempdir().unwrap();
+            let p = dir.path().join("a.npy");
+            write_f64(&p, &shape, &data).unwrap();
+            let (s, d) = read_f64(&p).unwrap();
+            prop_assert_eq!(s, shape);
+            prop_assert_eq!(d, data);
+        }
+    }
+}

@@ -1,0 +1,177 @@
+//! The simulated station: a camera that renders what the real one would
+//! record ([`SimCamera`]), seeded random scenes ([`RandomSurfaceSpec`]), and
+//! [`simulate`], which writes a whole acquisition folder with its truth.
+
+mod camera;
+mod fastcos;
+mod scene;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+pub use camera::{SimCamera, SimParams};
+pub use fastcos::cos_cycles;
+pub use scene::RandomSurfaceSpec;
+
+use crate::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};
+use crate::npy::{self, NpyError};
+use crate::patterns::Pattern;
+use crate::station::{Station, StationError};
+use crate::surfaces_file::{SurfacesFile, SurfacesFileError};
+use crate::trace::{Plate, TracedView};
+
+/// What can go wrong simulating.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A parameter is out of range.
+    #[error("simulation: `{field}`: {problem}")]
+    Invalid {
+        /// The parameter (CLI flag) name.
+        field: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
+    /// Writing the acquisition failed.
+    #[error(transparent)]
+    Acquisition(#[from] AcquisitionError),
+    /// Writing a truth array failed.
+    #[error(transparent)]
+    Npy(#[from] NpyError),
+    /// Writing the station copy failed.
+    #[error(transparent)]
+    Station(#[from] StationError),
+    /// Writing the truth surfaces failed.
+    #[error(transparent)]
+    Surfaces(#[from] SurfacesFileError),
+    /// Creating a folder failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The folder.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Figures of a finished simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimulationReport {
+    /// Frames written.
+    pub frames: usize,
+    /// Camera pixels that see the element.
+    pub lit_pixels: usize,
+    /// Pixels with a front (S1) / back (S2) / third (S3) path.
+    pub paths: [usize; 3],
+    /// Counts per unit radiance used.
+    pub gain: f64,
+    /// Seconds spent tracing.
+    pub trace_s: f64,
+    /// Mean seconds to render one frame (noise included, I/O excluded).
+    pub render_s_per_frame: f64,
+}
+
+/// One simulated acquisition to write.
+#[derive(Debug, Clone)]
+pub struct Simulation<'a> {
+    /// The station.
+    pub station: &'a Station,
+    /// The element with its true surfaces.
+    pub plate: &'a Plate,
+    /// The same surfaces as written to `truth/truth_surfaces.json`.
+    pub truth: &'a SurfacesFile,
+    /// Patterns in capture order.
+    pub patterns: &'a [Pattern],
+    /// Camera settings.
+    pub params: SimParams,
+    /// NPY stack or PNG files.
+    pub layout: FrameLayout,
+    /// Whether an existing acquisition in `out` may be replaced.
+    pub overwrite: bool,
+}
+
+/// Renders the simulation's patterns into the acquisition folder `out`
+/// (spec layout, `station.toml` copied beside it), and writes the truth into
+/// `out/truth/`: `truth_surfaces.json`, `truth_screen_coords.npy`,
+/// `fresnel_weights.npy`, `path_status.npy`.
+///
+/// # Errors
+/// [`SimError`] for bad parameters or when a file cannot be written; frames
+/// already written stay on disk.
+pub fn simulate(sim: &Simulation, out: &Path) -> Result<SimulationReport, SimError> {
+    let Simulation {
+        station,
+        plate,
+        truth,
+        patterns,
+        params,
+        layout,
+        overwrite,
+    } = sim.clone();
+    params.validate()?;
+    let t0 = Instant::now();
+    let view = TracedView::trace(station, plate);
+    let trace_s = t0.elapsed().as_secs_f64();
+    let mut camera = SimCamera::new(&view, &station.screen, params)?;
+    let frames: Vec<FrameInfo> = patterns
+        .iter()
+        .enumerate()
+        .map(|(index, p)| FrameInfo {
+            index,
+            direction_deg: p.direction_deg,
+            tau: p.tau,
+            phase_rad: p.phase_rad,
+        })
+        .collect();
+    let (w, h) = camera.resolution();
+    let mut writer = AcquisitionWriter::create(
+        out,
+        "station.toml",
+        layout,
+        &frames,
+        w as u32,
+        h as u32,
+        overwrite,
+    )?;
+    station.save(&out.join("station.toml"))?;
+    write_truth(out, &view, truth)?;
+    let mut frame = vec![0u16; w * h];
+    let mut render_s = 0.0;
+    for (index, pattern) in patterns.iter().enumerate() {
+        let t = Instant::now();
+        camera.render(pattern, index as u64, &mut frame);
+        render_s += t.elapsed().as_secs_f64();
+        writer.write_frame(index, &frame)?;
+    }
+    writer.finish()?;
+    Ok(SimulationReport {
+        frames: patterns.len(),
+        lit_pixels: camera.lit_pixels(),
+        paths: [view.count(0), view.count(1), view.count(2)],
+        gain: camera.gain(),
+        trace_s,
+        render_s_per_frame: render_s / patterns.len().max(1) as f64,
+    })
+}
+
+fn write_truth(out: &Path, view: &TracedView, truth: &SurfacesFile) -> Result<(), SimError> {
+    let dir = out.join("truth");
+    std::fs::create_dir_all(&dir).map_err(|source| SimError::Io {
+        path: dir.clone(),
+        source,
+    })?;
+    let (h, w) = (view.height, view.width);
+    truth.save(&dir.join("truth_surfaces.json"))?;
+    npy::write_f64(
+        &dir.join("truth_screen_coords.npy"),
+        &[h, w, 2, 2],
+        &view.screen_coords(),
+    )?;
+    npy::write_f64(
+        &dir.join("fresnel_weights.npy"),
+        &[h, w, 3],
+        &view.weights(),
+    )?;
+    npy::write_u8(&dir.join("path_status.npy"), &[h, w, 3], &view.status())?;
+    Ok(())
+}

@@ -1,0 +1,175 @@
+//! Hardware profiles (`hw/`) and the symmetric layout of the paper's station,
+//! from which a `station.toml` can be built.
+
+use std::path::Path;
+
+use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::{Camera, Element, Screen, Station, StationError};
+
+/// Format tag of a camera profile.
+pub const CAMERA_PROFILE_FORMAT: &str = "mfd-camera-profile/1";
+/// Format tag of a display profile.
+pub const DISPLAY_PROFILE_FORMAT: &str = "mfd-display-profile/1";
+
+/// A camera model's fixed properties (`hw/camera/*.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraProfile {
+    /// Must be `mfd-camera-profile/1`.
+    pub format: String,
+    /// Vendor and model.
+    pub model: String,
+    /// Sensor `[width, height]` in pixels.
+    pub resolution: [u32; 2],
+    /// Pixel pitch, µm.
+    pub pixel_pitch_um: f64,
+    /// Native ADC bit depth.
+    pub bit_depth: u32,
+}
+
+/// A display model's fixed properties (`hw/display/*.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisplayProfile {
+    /// Must be `mfd-display-profile/1`.
+    pub format: String,
+    /// Vendor and model.
+    pub model: String,
+    /// Panel `[width, height]` in pixels.
+    pub resolution: [u32; 2],
+    /// Pixel pitch, mm.
+    pub pixel_pitch_mm: f64,
+    /// Panel diagonal, inches (documentation; the pitch is what is used).
+    pub diagonal_in: f64,
+    /// Display gamma: emitted luminance ∝ (level / max)^gamma.
+    pub gamma: f64,
+    /// Time for the LCD to settle after a new frame is presented, ms.
+    pub settle_ms: f64,
+}
+
+fn load_profile<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    format: &str,
+    read_format: impl Fn(&T) -> &str,
+) -> Result<T, StationError> {
+    let text = std::fs::read_to_string(path).map_err(|source| StationError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let profile: T = toml::from_str(&text).map_err(|source| StationError::Parse {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if read_format(&profile) != format {
+        return Err(StationError::Invalid {
+            path: path.to_path_buf(),
+            field: "format",
+            problem: format!("expected \"{format}\", found \"{}\"", read_format(&profile)),
+        });
+    }
+    Ok(profile)
+}
+
+impl CameraProfile {
+    /// Reads a camera profile.
+    ///
+    /// # Errors
+    /// [`StationError`] naming the file and field.
+    pub fn load(path: &Path) -> Result<Self, StationError> {
+        load_profile(path, CAMERA_PROFILE_FORMAT, |p: &Self| &p.format)
+    }
+}
+
+impl DisplayProfile {
+    /// Reads a display profile.
+    ///
+    /// # Errors
+    /// [`StationError`] naming the file and field.
+    pub fn load(path: &Path) -> Result<Self, StationError> {
+        load_profile(path, DISPLAY_PROFILE_FORMAT, |p: &Self| &p.format)
+    }
+}
+
+/// The paper's layout (§3, Fig. 7a): camera and screen at the same height
+/// above the element, the camera's axis tilted from −z by `tilt_deg` in the
+/// x–z plane and aimed at the element's centre, the screen parallel to the
+/// element and centred on the specular reflection of the camera's axis, with
+/// u along +x and v along −y.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SymmetricLayout {
+    /// Height of the camera's projection centre above the element, mm.
+    pub camera_height_mm: f64,
+    /// Height of the screen plane above the element, mm.
+    pub screen_height_mm: f64,
+    /// Angle between the camera's axis and −z, degrees.
+    pub tilt_deg: f64,
+    /// Lens focal length, mm.
+    pub focal_length_mm: f64,
+    /// The element.
+    pub element: Element,
+}
+
+impl SymmetricLayout {
+    /// The paper's simulated element: n = 1.5, 10 mm thick, Ø 51 mm.
+    pub fn paper_element() -> Element {
+        Element {
+            refractive_index: 1.5,
+            thickness_mm: 10.0,
+            aperture_radius_mm: 25.5,
+            aperture_center_mm: Point2::origin(),
+        }
+    }
+
+    /// Builds the station from the two profiles.
+    ///
+    /// # Errors
+    /// [`StationError::Invalid`] when the result is not a possible station
+    /// (checked exactly as a loaded file is).
+    pub fn build(
+        &self,
+        camera: &CameraProfile,
+        display: &DisplayProfile,
+    ) -> Result<Station, StationError> {
+        let t = self.tilt_deg.to_radians();
+        let x_cam = Vector3::new(0.0, -1.0, 0.0);
+        let axis = Vector3::new(t.sin(), 0.0, -t.cos());
+        let y_cam = axis.cross(&x_cam);
+        // `+ 0.0` turns the −0.0 of the cross product into 0.0 for tidy files.
+        let m = Matrix3::from_columns(&[x_cam, y_cam, axis]).map(|v| v + 0.0);
+        let [w, h] = camera.resolution;
+        let cam = Camera {
+            position_mm: Point3::new(-self.camera_height_mm * t.tan(), 0.0, self.camera_height_mm),
+            world_from_camera: Rotation3::from_matrix_unchecked(m),
+            focal_length_mm: self.focal_length_mm,
+            pixel_pitch_mm: camera.pixel_pitch_um * 1e-3,
+            width: w,
+            height: h,
+            principal_point_px: Point2::new(f64::from(w) / 2.0, f64::from(h) / 2.0),
+        };
+        let [sw, sh] = display.resolution;
+        let p = display.pixel_pitch_mm;
+        let centre = Point3::new(self.screen_height_mm * t.tan(), 0.0, self.screen_height_mm);
+        let u_axis = Unit::new_normalize(Vector3::x());
+        let v_axis = Unit::new_normalize(Vector3::new(0.0, -1.0, 0.0));
+        let origin = centre
+            - (f64::from(sw) * p / 2.0) * u_axis.as_ref()
+            - (f64::from(sh) * p / 2.0) * v_axis.as_ref();
+        let station = Station {
+            camera: cam,
+            screen: Screen {
+                width: sw,
+                height: sh,
+                pixel_pitch_mm: p,
+                origin_mm: origin,
+                u_axis,
+                v_axis,
+            },
+            element: self.element.clone(),
+        };
+        // Round-trip through the file form so a built station passes the very
+        // checks a loaded one does.
+        Station::from_file(&station.to_file(), Path::new("<built station>"))
+    }
+}

@@ -1,0 +1,249 @@
+//! The station: pinhole camera, fringe screen and element, validated.
+//!
+//! [`Station::load`] reads `station.toml` (spec `mfd-station/1`) and rejects
+//! impossible geometry with a [`StationError`] that names the file and field.
+//! All lengths are millimetres in the world frame (see [`crate::conventions`]).
+
+mod build;
+mod file;
+mod validate;
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
+
+pub use build::{CameraProfile, DisplayProfile, SymmetricLayout};
+pub use file::{CameraFile, ElementFile, ScreenFile, StationFile, STATION_FORMAT};
+
+/// What went wrong reading or checking a station.
+#[derive(Debug, thiserror::Error)]
+pub enum StationError {
+    /// The file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The station file.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML for `mfd-station/1` (unknown or missing field, wrong type).
+    #[error("{path}: not a valid mfd-station/1 file: {source}")]
+    Parse {
+        /// The station file.
+        path: PathBuf,
+        /// The TOML error, which names the field.
+        #[source]
+        source: toml::de::Error,
+    },
+    /// A field holds a value the station cannot have.
+    #[error("{path}: field `{field}`: {problem}")]
+    Invalid {
+        /// The station file (or `<memory>`).
+        path: PathBuf,
+        /// Dotted field name, e.g. `camera.rotation`.
+        field: &'static str,
+        /// What is wrong and what was expected.
+        problem: String,
+    },
+}
+
+/// An ideal pinhole camera.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    /// Projection centre C, world frame, mm.
+    pub position_mm: Point3<f64>,
+    /// Rotation taking camera-frame vectors to the world frame.
+    pub world_from_camera: Rotation3<f64>,
+    /// Focal length, mm.
+    pub focal_length_mm: f64,
+    /// Pixel pitch, mm.
+    pub pixel_pitch_mm: f64,
+    /// Sensor width in pixels (columns).
+    pub width: u32,
+    /// Sensor height in pixels (rows).
+    pub height: u32,
+    /// Principal point `(cx, cy)` in pixels.
+    pub principal_point_px: Point2<f64>,
+}
+
+impl Camera {
+    /// Unit direction, world frame, of the ray through the centre of pixel
+    /// (column `i`, row `j`), per the spec.
+    pub fn ray_direction(&self, i: u32, j: u32) -> Unit<Vector3<f64>> {
+        let p = self.pixel_pitch_mm;
+        let v_cam = Vector3::new(
+            (f64::from(i) + 0.5 - self.principal_point_px.x) * p,
+            (f64::from(j) + 0.5 - self.principal_point_px.y) * p,
+            self.focal_length_mm,
+        );
+        Unit::new_normalize(self.world_from_camera * v_cam)
+    }
+
+    /// The optical axis, world frame.
+    pub fn axis(&self) -> Unit<Vector3<f64>> {
+        Unit::new_normalize(self.world_from_camera * Vector3::z())
+    }
+
+    /// Number of pixels.
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+/// The fringe screen: a plane of square pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Screen {
+    /// Width in screen pixels.
+    pub width: u32,
+    /// Height in screen pixels.
+    pub height: u32,
+    /// Pixel pitch, mm.
+    pub pixel_pitch_mm: f64,
+    /// World position of `(u, v) = (0, 0)`, mm.
+    pub origin_mm: Point3<f64>,
+    /// Direction of increasing u, world frame.
+    pub u_axis: Unit<Vector3<f64>>,
+    /// Direction of increasing v, world frame.
+    pub v_axis: Unit<Vector3<f64>>,
+}
+
+impl Screen {
+    /// World point of continuous screen coordinate `(u, v)`.
+    pub fn world_point(&self, u: f64, v: f64) -> Point3<f64> {
+        self.origin_mm + self.pixel_pitch_mm * (u * self.u_axis.as_ref() + v * self.v_axis.as_ref())
+    }
+
+    /// Unit normal `u × v` of the screen plane.
+    pub fn normal(&self) -> Unit<Vector3<f64>> {
+        Unit::new_normalize(self.u_axis.cross(&self.v_axis))
+    }
+
+    /// Screen coordinates `(u, v)` of a world point (projected onto the plane).
+    pub fn coordinates(&self, p: &Point3<f64>) -> (f64, f64) {
+        let d = p - self.origin_mm;
+        (
+            d.dot(&self.u_axis) / self.pixel_pitch_mm,
+            d.dot(&self.v_axis) / self.pixel_pitch_mm,
+        )
+    }
+
+    /// Whether `(u, v)` lies on the screen, `[0, width] × [0, height]`.
+    pub fn contains(&self, u: f64, v: f64) -> bool {
+        (0.0..=f64::from(self.width)).contains(&u) && (0.0..=f64::from(self.height)).contains(&v)
+    }
+
+    /// World point of the screen's centre.
+    pub fn centre(&self) -> Point3<f64> {
+        self.world_point(f64::from(self.width) / 2.0, f64::from(self.height) / 2.0)
+    }
+}
+
+/// The transparent plate under test (nominal geometry; the surfaces' shapes
+/// are Zernike expansions kept elsewhere).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Element {
+    /// Refractive index (air is 1).
+    pub refractive_index: f64,
+    /// Nominal thickness, mm: the back surface is `z = -thickness_mm + W2`.
+    pub thickness_mm: f64,
+    /// Radius of the reported aperture, mm.
+    pub aperture_radius_mm: f64,
+    /// Centre of the reported aperture `(x, y)`, mm.
+    pub aperture_center_mm: Point2<f64>,
+}
+
+/// A validated station.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Station {
+    /// The camera.
+    pub camera: Camera,
+    /// The screen.
+    pub screen: Screen,
+    /// The element.
+    pub element: Element,
+}
+
+impl Station {
+    /// Reads and validates a `station.toml`.
+    ///
+    /// # Errors
+    /// [`StationError`] naming the file and, for bad values, the field.
+    pub fn load(path: &Path) -> Result<Self, StationError> {
+        let text = std::fs::read_to_string(path).map_err(|source| StationError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parses and validates station TOML; `path` is only used in errors.
+    ///
+    /// # Errors
+    /// [`StationError::Parse`] or [`StationError::Invalid`].
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, StationError> {
+        let file: StationFile = toml::from_str(text).map_err(|source| StationError::Parse {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_file(&file, path)
+    }
+
+    /// Validates the on-disk form.
+    ///
+    /// # Errors
+    /// [`StationError::Invalid`] naming the first bad field.
+    pub fn from_file(file: &StationFile, path: &Path) -> Result<Self, StationError> {
+        validate::station(file, path)
+    }
+
+    /// The on-disk form of this station.
+    pub fn to_file(&self) -> StationFile {
+        let r: &Matrix3<f64> = self.camera.world_from_camera.matrix();
+        let c = &self.camera;
+        StationFile {
+            format: STATION_FORMAT.to_string(),
+            camera: CameraFile {
+                position_mm: c.position_mm.coords.into(),
+                rotation: [0, 1, 2].map(|row| [r[(row, 0)], r[(row, 1)], r[(row, 2)]]),
+                focal_length_mm: c.focal_length_mm,
+                pixel_pitch_um: c.pixel_pitch_mm * 1000.0,
+                resolution: [c.width, c.height],
+                principal_point_px: Some([c.principal_point_px.x, c.principal_point_px.y]),
+            },
+            screen: ScreenFile {
+                resolution: [self.screen.width, self.screen.height],
+                pixel_pitch_mm: self.screen.pixel_pitch_mm,
+                origin_mm: self.screen.origin_mm.coords.into(),
+                u_axis: self.screen.u_axis.into_inner().into(),
+                v_axis: self.screen.v_axis.into_inner().into(),
+            },
+            element: ElementFile {
+                refractive_index: self.element.refractive_index,
+                thickness_mm: self.element.thickness_mm,
+                aperture_radius_mm: self.element.aperture_radius_mm,
+                aperture_center_mm: Some([
+                    self.element.aperture_center_mm.x,
+                    self.element.aperture_center_mm.y,
+                ]),
+            },
+        }
+    }
+
+    /// TOML text of this station (`mfd-station/1`).
+    pub fn to_toml_string(&self) -> String {
+        // Serialising plain structs of numbers and strings cannot fail.
+        toml::to_string(&self.to_file()).unwrap_or_default()
+    }
+
+    /// Writes this station as `station.toml`.
+    ///
+    /// # Errors
+    /// [`StationError::Io`] when the file cannot be written.
+    pub fn save(&self, path: &Path) -> Result<(), StationError> {
+        std::fs::write(path, self.to_toml_string()).map_err(|source| StationError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+}
