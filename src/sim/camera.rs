@@ -130,6 +130,7 @@ pub struct SimCamera {
     cache: Option<DirectionCache>,
     modulation: Vec<f64>,
     signal: Vec<f64>,
+    normals: Vec<f64>,
 }
 
 impl SimCamera {
@@ -184,6 +185,7 @@ impl SimCamera {
             base,
             cache: None,
             signal: vec![0.0; view.width * view.height],
+            normals: vec![0.0; view.width * view.height],
         })
     }
 
@@ -249,25 +251,41 @@ impl SimCamera {
     /// Renders one frame of `pattern` into `out` (row-major, `width·height`
     /// counts); `frame_index` seeds its noise.
     pub fn render(&mut self, pattern: &Pattern, frame_index: u64, out: &mut [u16]) {
-        let read_sigma = self.params.noise_frac * self.params.full_scale();
-        let shot = self
-            .params
-            .full_well_electrons
-            .map(|fw| self.params.full_scale() / fw);
-        let max = self.params.full_scale();
-        let mut rng =
-            Xoshiro256PlusPlus::seed_from_u64(splitmix(self.params.seed ^ splitmix(frame_index)));
-        let signal = self.expected(pattern);
-        for (o, &x) in out.iter_mut().zip(signal) {
-            let mut v = x;
-            if read_sigma > 0.0 || shot.is_some() {
-                let var = read_sigma * read_sigma + shot.map_or(0.0, |c| c * x.max(0.0));
-                let z: f64 = StandardNormal.sample(&mut rng);
-                v += var.sqrt() * z;
+        let fs = self.params.full_scale();
+        let read_var = (self.params.noise_frac * fs).powi(2);
+        // Shot noise: variance in counts = counts × (counts per electron).
+        let shot = self.params.full_well_electrons.map_or(0.0, |fw| fs / fw);
+        let noisy = read_var > 0.0 || shot > 0.0;
+        if noisy {
+            // Draw the normals first (a sequential RNG), so that the pass
+            // below is branch-free and vectorises.
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(splitmix(
+                self.params.seed ^ splitmix(frame_index),
+            ));
+            for z in &mut self.normals {
+                *z = StandardNormal.sample(&mut rng);
             }
-            *o = v.round().clamp(0.0, max) as u16;
+        }
+        self.expected(pattern);
+        let (signal, normals) = (&self.signal, &self.normals);
+        if noisy {
+            for ((o, &x), &z) in out.iter_mut().zip(signal).zip(normals) {
+                let v = x + (read_var + shot * x.max(0.0)).sqrt() * z;
+                *o = quantise(v, fs);
+            }
+        } else {
+            for (o, &x) in out.iter_mut().zip(signal) {
+                *o = quantise(x, fs);
+            }
         }
     }
+}
+
+/// Rounds to the nearest count and clips to `[0, full_scale]`.
+#[inline(always)]
+fn quantise(v: f64, full_scale: f64) -> u16 {
+    // After the clamp v + 0.5 ≥ 0.5, so truncation is round-half-up.
+    (v.clamp(0.0, full_scale) + 0.5) as u16
 }
 
 /// SplitMix64 finaliser: decorrelates neighbouring seeds.
