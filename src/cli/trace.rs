@@ -58,7 +58,7 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     npy::write_f64(&out("fresnel_weights.npy"), &[h, w, 3], &view.weights())?;
     npy::write_u8(&out("path_status.npy"), &[h, w, 3], &view.status())?;
     println!(
-        "traced {w}x{h} pixels in {elapsed:.2} s: front {} , back {}, third {} pixels",
+        "traced {w}x{h} pixels in {elapsed:.2} s: front {}, back {}, third {} pixels",
         view.count(0),
         view.count(1),
         view.count(2)

@@ -125,9 +125,12 @@ pub struct SimCamera {
     uv: Vec<Vec<(f64, f64)>>,
     /// `gain · w_k / 2` per path and lit pixel.
     amp: Vec<Vec<f64>>,
-    /// Mean level per pixel, counts: `gain (ambient + Σ w_k / 2)`.
-    base: Vec<f64>,
+    /// Mean level per lit pixel, counts: `gain (ambient + Σ w_k / 2)`.
+    base_lit: Vec<f64>,
+    /// Level of pixels that see no path, counts: `gain · ambient`.
+    dark: f64,
     cache: Option<DirectionCache>,
+    /// `Σ_k amp_k cos(2π τ s_k + φ)` per lit pixel for the current pattern.
     modulation: Vec<f64>,
     signal: Vec<f64>,
     normals: Vec<f64>,
@@ -161,12 +164,14 @@ impl SimCamera {
             brightest = brightest.max(total);
         }
         let gain = params.gain.unwrap_or(0.9 * params.full_scale() / brightest);
-        let mut base = vec![gain * params.ambient; view.width * view.height];
-        for (q, &idx) in lit.iter().enumerate() {
-            base[idx as usize] += (0..n_paths)
-                .map(|k| 0.5 * gain * weights[k][q])
-                .sum::<f64>();
-        }
+        let dark = gain * params.ambient;
+        let base_lit = (0..lit.len())
+            .map(|q| {
+                dark + (0..n_paths)
+                    .map(|k| 0.5 * gain * weights[k][q])
+                    .sum::<f64>()
+            })
+            .collect();
         let amp = weights
             .into_iter()
             .map(|w| w.into_iter().map(|w| 0.5 * gain * w).collect())
@@ -182,9 +187,10 @@ impl SimCamera {
             lit,
             uv,
             amp,
-            base,
+            base_lit,
+            dark,
             cache: None,
-            signal: vec![0.0; view.width * view.height],
+            signal: Vec::new(),
             normals: vec![0.0; view.width * view.height],
         })
     }
@@ -226,24 +232,33 @@ impl SimCamera {
         self.cache.as_ref().expect("cache filled above")
     }
 
-    /// Noise-free expected counts (before rounding and clipping) of every
-    /// pixel for `pattern`, computed with the fast cosine.
-    pub fn expected(&mut self, pattern: &Pattern) -> &[f64] {
+    /// Fills `modulation` for `pattern`; returns the falloff `e(τ)`.
+    fn modulate(&mut self, pattern: &Pattern) -> f64 {
         let e = (-(pattern.tau / self.params.tau_max).powi(2)).exp();
         let phase_cycles = pattern.phase_rad / std::f64::consts::TAU;
         let tau = pattern.tau;
         self.direction(pattern.direction_deg);
         let cache = self.cache.as_ref().expect("direction cached");
-        self.signal.copy_from_slice(&self.base);
-        // Contiguous per-lit-pixel sums first (vectorisable), one scatter after.
-        self.modulation.fill(0.0);
-        for (amp, s) in self.amp.iter().zip(&cache.s) {
-            for ((m, &a), &s) in self.modulation.iter_mut().zip(amp).zip(s) {
-                *m += a * cos_cycles(tau * s + phase_cycles);
+        // Path by path over contiguous arrays: the loops vectorise.
+        for (k, (amp, s)) in self.amp.iter().zip(&cache.s).enumerate() {
+            let terms = self.modulation.iter_mut().zip(amp).zip(s);
+            if k == 0 {
+                terms.for_each(|((m, &a), &s)| *m = a * cos_cycles(tau * s + phase_cycles));
+            } else {
+                terms.for_each(|((m, &a), &s)| *m += a * cos_cycles(tau * s + phase_cycles));
             }
         }
-        for (&idx, &m) in self.lit.iter().zip(&self.modulation) {
-            self.signal[idx as usize] += e * m;
+        e
+    }
+
+    /// Noise-free expected counts (before rounding and clipping) of every
+    /// pixel for `pattern`.
+    pub fn expected(&mut self, pattern: &Pattern) -> &[f64] {
+        let e = self.modulate(pattern);
+        self.signal.clear();
+        self.signal.resize(self.width * self.height, self.dark);
+        for ((&idx, &m), &b) in self.lit.iter().zip(&self.modulation).zip(&self.base_lit) {
+            self.signal[idx as usize] = b + e * m;
         }
         &self.signal
     }
@@ -255,28 +270,31 @@ impl SimCamera {
         let read_var = (self.params.noise_frac * fs).powi(2);
         // Shot noise: variance in counts = counts × (counts per electron).
         let shot = self.params.full_well_electrons.map_or(0.0, |fw| fs / fw);
-        let noisy = read_var > 0.0 || shot > 0.0;
-        if noisy {
-            // Draw the normals first (a sequential RNG), so that the pass
-            // below is branch-free and vectorises.
-            let mut rng = Xoshiro256PlusPlus::seed_from_u64(splitmix(
-                self.params.seed ^ splitmix(frame_index),
-            ));
-            for z in &mut self.normals {
-                *z = StandardNormal.sample(&mut rng);
+        let e = self.modulate(pattern);
+        let lit = self.lit.iter().zip(&self.modulation).zip(&self.base_lit);
+        if read_var == 0.0 && shot == 0.0 {
+            out.fill(quantise(self.dark, fs));
+            for ((&idx, &m), &b) in lit {
+                out[idx as usize] = quantise(b + e * m, fs);
             }
+            return;
         }
-        self.expected(pattern);
-        let (signal, normals) = (&self.signal, &self.normals);
-        if noisy {
-            for ((o, &x), &z) in out.iter_mut().zip(signal).zip(normals) {
-                let v = x + (read_var + shot * x.max(0.0)).sqrt() * z;
-                *o = quantise(v, fs);
-            }
-        } else {
-            for (o, &x) in out.iter_mut().zip(signal) {
-                *o = quantise(x, fs);
-            }
+        // Draw the normals first (a sequential RNG), so that the passes
+        // below are branch-free and vectorise.
+        let mut rng =
+            Xoshiro256PlusPlus::seed_from_u64(splitmix(self.params.seed ^ splitmix(frame_index)));
+        self.normals.resize(self.width * self.height, 0.0);
+        for z in &mut self.normals {
+            *z = StandardNormal.sample(&mut rng);
+        }
+        let sigma_dark = (read_var + shot * self.dark).sqrt();
+        for (o, &z) in out.iter_mut().zip(&self.normals) {
+            *o = quantise(self.dark + sigma_dark * z, fs);
+        }
+        for ((&idx, &m), &b) in lit {
+            let x = b + e * m;
+            let sigma = (read_var + shot * x.max(0.0)).sqrt();
+            out[idx as usize] = quantise(x + sigma * self.normals[idx as usize], fs);
         }
     }
 }

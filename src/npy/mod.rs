@@ -2,8 +2,12 @@
 //! C order, dtypes `|u1`, `<u2`, `<f8` and `|b1`. Stacks of camera frames
 //! are written and read one frame at a time, never whole.
 
+mod stack;
+
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::io::{BufReader, BufWriter, Read, Write};
+
+pub use stack::{NpyStackReader, NpyStackWriter};
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8] = b"\x93NUMPY";
@@ -70,14 +74,14 @@ pub enum StackDtype {
 }
 
 impl StackDtype {
-    fn descr(self) -> &'static str {
+    pub(crate) fn descr(self) -> &'static str {
         match self {
             StackDtype::U8 => "|u1",
             StackDtype::U16 => "<u2",
         }
     }
 
-    fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             StackDtype::U8 => 1,
             StackDtype::U16 => 2,
@@ -96,14 +100,14 @@ pub struct Header {
     pub data_offset: u64,
 }
 
-fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> NpyError + '_ {
+pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> NpyError + '_ {
     move |source| NpyError::Io {
         path: path.to_path_buf(),
         source,
     }
 }
 
-fn header_bytes(descr: &str, shape: &[usize]) -> Vec<u8> {
+pub(crate) fn header_bytes(descr: &str, shape: &[usize]) -> Vec<u8> {
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
     let shape_txt = match dims.len() {
         1 => format!("({},)", dims[0]),
@@ -194,7 +198,7 @@ fn read_header(path: &Path, r: &mut impl Read) -> Result<Header, NpyError> {
     })
 }
 
-fn open_header(path: &Path) -> Result<(BufReader<File>, Header), NpyError> {
+pub(crate) fn open_header(path: &Path) -> Result<(BufReader<File>, Header), NpyError> {
     let mut r = BufReader::new(File::open(path).map_err(io_err(path))?);
     let h = read_header(path, &mut r)?;
     Ok((r, h))
@@ -284,223 +288,6 @@ pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<(), NpyEr
 pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<(), NpyError> {
     check_shape(path, shape, data.len())?;
     write_raw(path, "|u1", shape, data)
-}
-
-/// Writes a `[frames, rows, columns]` stack one frame at a time.
-#[derive(Debug)]
-pub struct NpyStackWriter {
-    path: PathBuf,
-    out: BufWriter<File>,
-    dtype: StackDtype,
-    frames: usize,
-    pixels: usize,
-    written: usize,
-}
-
-impl NpyStackWriter {
-    /// Creates the file and writes the header for `frames` frames.
-    ///
-    /// # Errors
-    /// [`NpyError::Io`] when the file cannot be created.
-    pub fn create(
-        path: &Path,
-        dtype: StackDtype,
-        frames: usize,
-        rows: usize,
-        cols: usize,
-    ) -> Result<Self, NpyError> {
-        let mut out = BufWriter::with_capacity(1 << 20, File::create(path).map_err(io_err(path))?);
-        out.write_all(&header_bytes(dtype.descr(), &[frames, rows, cols]))
-            .map_err(io_err(path))?;
-        Ok(NpyStackWriter {
-            path: path.to_path_buf(),
-            out,
-            dtype,
-            frames,
-            pixels: rows * cols,
-            written: 0,
-        })
-    }
-
-    /// Appends the next frame (values above 255 are an error for a u8 stack).
-    ///
-    /// # Errors
-    /// Wrong frame size, too many frames, a u8 overflow, or an I/O failure.
-    pub fn append(&mut self, frame: &[u16]) -> Result<(), NpyError> {
-        let unexpected = |expected: String, found: String| NpyError::Unexpected {
-            path: self.path.clone(),
-            expected,
-            found,
-        };
-        if frame.len() != self.pixels {
-            return Err(unexpected(
-                format!("{} pixels per frame", self.pixels),
-                format!("{}", frame.len()),
-            ));
-        }
-        if self.written == self.frames {
-            return Err(unexpected(
-                format!("{} frames", self.frames),
-                "one more".into(),
-            ));
-        }
-        let bytes: Vec<u8> = match self.dtype {
-            StackDtype::U16 => frame.iter().flat_map(|v| v.to_le_bytes()).collect(),
-            StackDtype::U8 => {
-                if let Some(v) = frame.iter().find(|&&v| v > 255) {
-                    return Err(unexpected("8-bit values".into(), format!("{v}")));
-                }
-                frame.iter().map(|&v| v as u8).collect()
-            }
-        };
-        self.out.write_all(&bytes).map_err(io_err(&self.path))?;
-        self.written += 1;
-        Ok(())
-    }
-
-    /// Flushes the data written so far to the OS (a crash keeps it readable).
-    ///
-    /// # Errors
-    /// [`NpyError::Io`].
-    pub fn flush(&mut self) -> Result<(), NpyError> {
-        self.out.flush().map_err(io_err(&self.path))
-    }
-
-    /// Flushes and checks that every announced frame was written.
-    ///
-    /// # Errors
-    /// [`NpyError::Truncated`] when frames are missing; [`NpyError::Io`].
-    pub fn finish(mut self) -> Result<(), NpyError> {
-        self.flush()?;
-        if self.written != self.frames {
-            return Err(NpyError::Truncated {
-                path: self.path,
-                complete: self.written,
-                expected: self.frames,
-            });
-        }
-        Ok(())
-    }
-}
-
-/// Reads frames of a `[frames, rows, columns]` uint8/uint16 stack by seeking.
-#[derive(Debug)]
-pub struct NpyStackReader {
-    path: PathBuf,
-    file: File,
-    dtype: StackDtype,
-    frames: usize,
-    rows: usize,
-    cols: usize,
-    data_offset: u64,
-    complete: usize,
-}
-
-impl NpyStackReader {
-    /// Opens a stack and checks its dtype and shape.
-    ///
-    /// # Errors
-    /// [`NpyError`] for a non-3-D array or another dtype.
-    pub fn open(path: &Path) -> Result<Self, NpyError> {
-        let (_, h) = open_header(path)?;
-        let dtype = match h.descr.as_str() {
-            "|u1" | "<u1" | "u1" => StackDtype::U8,
-            "<u2" => StackDtype::U16,
-            other => {
-                return Err(NpyError::Unexpected {
-                    path: path.to_path_buf(),
-                    expected: "a uint8 or little-endian uint16 stack".into(),
-                    found: format!("dtype {other}"),
-                })
-            }
-        };
-        let [frames, rows, cols] = h.shape[..] else {
-            return Err(NpyError::Unexpected {
-                path: path.to_path_buf(),
-                expected: "shape [frames, rows, columns]".into(),
-                found: format!("shape {:?}", h.shape),
-            });
-        };
-        let file = File::open(path).map_err(io_err(path))?;
-        let len = file.metadata().map_err(io_err(path))?.len();
-        let frame_bytes = (rows * cols * dtype.size()) as u64;
-        let complete = len
-            .saturating_sub(h.data_offset)
-            .checked_div(frame_bytes)
-            .map_or(frames, |c| c.min(frames as u64) as usize);
-        Ok(NpyStackReader {
-            path: path.to_path_buf(),
-            file,
-            dtype,
-            frames,
-            rows,
-            cols,
-            data_offset: h.data_offset,
-            complete,
-        })
-    }
-
-    /// Frames announced by the header.
-    pub fn frames(&self) -> usize {
-        self.frames
-    }
-
-    /// Frames present in full in the file (fewer than [`Self::frames`] when truncated).
-    pub fn complete_frames(&self) -> usize {
-        self.complete
-    }
-
-    /// `(rows, columns)` of a frame.
-    pub fn frame_shape(&self) -> (usize, usize) {
-        (self.rows, self.cols)
-    }
-
-    /// Element type.
-    pub fn dtype(&self) -> StackDtype {
-        self.dtype
-    }
-
-    /// Reads frame `index` into `out` (u8 widened to u16).
-    ///
-    /// # Errors
-    /// [`NpyError::NoSuchFrame`], [`NpyError::Truncated`] naming the frame count, or I/O.
-    pub fn read_frame(&mut self, index: usize, out: &mut Vec<u16>) -> Result<(), NpyError> {
-        if index >= self.frames {
-            return Err(NpyError::NoSuchFrame {
-                path: self.path.clone(),
-                frame: index,
-                frames: self.frames,
-            });
-        }
-        if index >= self.complete {
-            return Err(NpyError::Truncated {
-                path: self.path.clone(),
-                complete: self.complete,
-                expected: self.frames,
-            });
-        }
-        let n = self.rows * self.cols;
-        let size = self.dtype.size();
-        let mut bytes = vec![0u8; n * size];
-        self.file
-            .seek(SeekFrom::Start(
-                self.data_offset + (index * n * size) as u64,
-            ))
-            .map_err(io_err(&self.path))?;
-        self.file
-            .read_exact(&mut bytes)
-            .map_err(io_err(&self.path))?;
-        out.clear();
-        match self.dtype {
-            StackDtype::U8 => out.extend(bytes.iter().map(|&b| u16::from(b))),
-            StackDtype::U16 => out.extend(
-                bytes
-                    .chunks_exact(2)
-                    .map(|c| u16::from_le_bytes([c[0], c[1]])),
-            ),
-        }
-        Ok(())
-    }
 }
 
 #[cfg(test)]
