@@ -14,6 +14,7 @@ pub mod npy;
 pub mod optics;
 pub mod patterns;
 pub mod sim;
+pub mod spectral;
 pub mod station;
 pub mod surfaces_file;
 pub mod trace;

@@ -26,6 +26,8 @@ enum Command {
     Simulate(cli::simulate::SimulateArgs),
     /// Build a station.toml from camera and display profiles and the paper's layout.
     Station(cli::station::StationArgs),
+    /// Reconstruct from an acquisition: screen points S1, S2 with uncertainty and quality maps.
+    Reconstruct(cli::reconstruct::ReconstructArgs),
     /// Benchmarks: print figures as one JSON line.
     Bench(cli::bench::BenchArgs),
 }
@@ -37,6 +39,7 @@ fn main() -> std::process::ExitCode {
         Command::Simulate(args) => cli::simulate::run(&args),
         Command::Station(args) => cli::station::run(&args),
         Command::Bench(args) => cli::bench::run(&args),
+        Command::Reconstruct(args) => cli::reconstruct::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

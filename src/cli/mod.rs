@@ -1,6 +1,7 @@
 //! Subcommands of the `mfd` binary.
 
 pub mod bench;
+pub mod reconstruct;
 pub mod simulate;
 pub mod station;
 pub mod trace;

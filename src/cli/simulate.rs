@@ -88,6 +88,10 @@ pub struct SimulateArgs {
     /// Also render the path with two internal round trips (S3, paper §5.1b).
     #[arg(long)]
     third_reflection: bool,
+    /// Factors on the back and third paths' Fresnel weights: 0 models an
+    /// AR-coated back face (the front reflection alone).
+    #[arg(long, default_value_t = 1.0)]
+    back_scale: f64,
     /// Write one PNG per frame (frames/NNNNNN.png) instead of one frames.npy stack.
     #[arg(long)]
     png: bool,
@@ -118,6 +122,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         noise_frac: args.noise,
         full_well_electrons: args.full_well,
         third_reflection: args.third_reflection,
+        path_scale: [1.0, args.back_scale, args.back_scale],
         seed: args.seed,
     };
     let layout = match (args.png, args.bit_depth) {

@@ -281,6 +281,16 @@ pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<(), NpyEr
     write_raw(path, "<f8", shape, &bytes)
 }
 
+/// Writes a uint16 array of `shape` (C order).
+///
+/// # Errors
+/// [`NpyError`] when the shape does not match or the file cannot be written.
+pub fn write_u16(path: &Path, shape: &[usize], data: &[u16]) -> Result<(), NpyError> {
+    check_shape(path, shape, data.len())?;
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    write_raw(path, "<u2", shape, &bytes)
+}
+
 /// Writes a uint8 array of `shape` (C order).
 ///
 /// # Errors

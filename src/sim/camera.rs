@@ -40,6 +40,9 @@ pub struct SimParams {
     pub full_well_electrons: Option<f64>,
     /// Whether the path with two internal round trips (S3) is rendered.
     pub third_reflection: bool,
+    /// Factors on the Fresnel weights of the front, back and third paths:
+    /// `[1, 0, 0]` models an AR-coated back, `[1, 1, 1]` bare glass.
+    pub path_scale: [f64; 3],
     /// Seed of the noise.
     pub seed: u64,
 }
@@ -54,6 +57,7 @@ impl Default for SimParams {
             noise_frac: 0.0,
             full_well_electrons: None,
             third_reflection: false,
+            path_scale: [1.0; 3],
             seed: 1,
         }
     }
@@ -156,7 +160,9 @@ impl SimCamera {
             lit.push(idx as u32);
             let mut total = params.ambient;
             for k in 0..n_paths {
-                let (u, v, w) = paths[k].map_or((0.0, 0.0, 0.0), |h| (h.u, h.v, h.weight));
+                let (u, v, w) = paths[k].map_or((0.0, 0.0, 0.0), |h| {
+                    (h.u, h.v, h.weight * params.path_scale[k])
+                });
                 uv[k].push((u, v));
                 weights[k].push(w);
                 total += w;

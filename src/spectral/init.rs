@@ -1,0 +1,179 @@
+//! Starting values from the power spectrum: per fringe direction, the
+//! windowed, zero-padded periodogram of a pixel's series over τ and its
+//! strongest peak in μ ∈ (0, 1]. With the paper's geometry the two
+//! reflections merge into one peak; the fit, not this, separates them.
+
+use std::sync::Arc;
+
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftPlanner};
+
+use super::model::Design;
+
+/// Zero-padding factor of the FFT (peak positions to 1/4 bin before the
+/// parabolic refinement).
+const PAD: usize = 4;
+
+/// How one direction's periodogram is computed.
+#[derive(Clone)]
+enum Plan {
+    /// τ on a uniform grid: FFT.
+    Uniform {
+        fft: Arc<dyn Fft<f64>>,
+        n_fft: usize,
+        dtau: f64,
+    },
+    /// Any other τ set: a direct DFT on a grid of μ.
+    Direct { taus: Vec<f64>, mu_grid: Vec<f64> },
+}
+
+/// Periodogram plans for every direction of a design.
+#[derive(Clone)]
+pub struct SpectrumPlans {
+    /// Per direction: frame indices (one phase, τ ascending), Hann window, plan.
+    dirs: Vec<(Vec<u32>, Vec<f64>, Plan)>,
+    /// 1 / (τ span) per direction: one Fourier bin in μ.
+    bin: Vec<f64>,
+}
+
+impl std::fmt::Debug for SpectrumPlans {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SpectrumPlans")
+            .field("bin", &self.bin)
+            .finish()
+    }
+}
+
+impl SpectrumPlans {
+    /// Plans for `design`: for each direction, the frames of its most
+    /// common phase sorted by τ.
+    pub fn new(design: &Design) -> Self {
+        let mut planner = FftPlanner::new();
+        let mut dirs = Vec::new();
+        let mut bin = Vec::new();
+        for d in 0..design.axes.len() {
+            let mut idx: Vec<u32> = (0..design.frames.len() as u32)
+                .filter(|&i| design.frames[i as usize].dir == d)
+                .collect();
+            let phase0 = idx
+                .first()
+                .map_or(0.0, |&i| design.frames[i as usize].phase_cycles);
+            idx.retain(|&i| design.frames[i as usize].phase_cycles == phase0);
+            idx.sort_by(|&a, &b| {
+                design.frames[a as usize]
+                    .tau
+                    .total_cmp(&design.frames[b as usize].tau)
+            });
+            let taus: Vec<f64> = idx.iter().map(|&i| design.frames[i as usize].tau).collect();
+            let n = taus.len();
+            let span = (taus.last().copied().unwrap_or(1.0) - taus.first().copied().unwrap_or(0.0))
+                .max(1e-9);
+            bin.push(1.0 / span);
+            let window: Vec<f64> = (0..n)
+                .map(|k| 0.5 - 0.5 * (std::f64::consts::TAU * (k as f64 + 0.5) / n as f64).cos())
+                .collect();
+            let dtau = span / (n.max(2) - 1) as f64;
+            let uniform = n >= 8
+                && taus
+                    .windows(2)
+                    .all(|w| ((w[1] - w[0]) - dtau).abs() < 1e-6 * dtau);
+            let plan = if uniform {
+                let n_fft = (PAD * n).next_power_of_two();
+                Plan::Uniform {
+                    fft: planner.plan_fft_forward(n_fft),
+                    n_fft,
+                    dtau,
+                }
+            } else {
+                let step = 1.0 / (PAD as f64 * span);
+                let mu_grid = (0..=(1.05 / step) as usize)
+                    .map(|k| k as f64 * step)
+                    .collect();
+                Plan::Direct { taus, mu_grid }
+            };
+            dirs.push((idx, window, plan));
+        }
+        SpectrumPlans { dirs, bin }
+    }
+
+    /// One Fourier bin in μ for direction `d`.
+    pub fn bin(&self, d: usize) -> f64 {
+        self.bin[d]
+    }
+
+    /// Strongest peak of direction `d`'s periodogram in `μ ∈ [3 bins, 1.05]`:
+    /// `(μ, peak power / median power)`. `y` is indexed by frame; excluded
+    /// samples are NaN and replaced by the mean.
+    pub fn peak(&self, d: usize, y: &[f64]) -> Option<(f64, f64)> {
+        let (idx, window, plan) = &self.dirs[d];
+        let vals: Vec<f64> = idx.iter().map(|&i| y[i as usize]).collect();
+        let good: Vec<f64> = vals.iter().copied().filter(|v| v.is_finite()).collect();
+        if good.len() < 8 {
+            return None;
+        }
+        let mean = good.iter().sum::<f64>() / good.len() as f64;
+        let centred: Vec<f64> = vals
+            .iter()
+            .zip(window)
+            .map(|(v, w)| if v.is_finite() { (v - mean) * w } else { 0.0 })
+            .collect();
+        let (mus, power) = match plan {
+            Plan::Uniform { fft, n_fft, dtau } => {
+                let mut buf: Vec<Complex<f64>> =
+                    centred.iter().map(|&v| Complex::new(v, 0.0)).collect();
+                buf.resize(*n_fft, Complex::new(0.0, 0.0));
+                let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
+                fft.process_with_scratch(&mut buf, &mut scratch);
+                let step = 1.0 / (*n_fft as f64 * dtau);
+                let m = ((1.05 / step) as usize).min(n_fft / 2);
+                let mus: Vec<f64> = (0..=m).map(|k| k as f64 * step).collect();
+                (
+                    mus,
+                    buf[..=m].iter().map(|c| c.norm_sqr()).collect::<Vec<f64>>(),
+                )
+            }
+            Plan::Direct { taus, mu_grid } => {
+                let p = mu_grid
+                    .iter()
+                    .map(|&mu| {
+                        let (mut re, mut im) = (0.0, 0.0);
+                        for (&t, &v) in taus.iter().zip(&centred) {
+                            let x = std::f64::consts::TAU * mu * t;
+                            re += v * x.cos();
+                            im -= v * x.sin();
+                        }
+                        re * re + im * im
+                    })
+                    .collect();
+                (mu_grid.clone(), p)
+            }
+        };
+        refine_peak(&mus, &power, 3.0 * self.bin[d])
+    }
+}
+
+/// Largest value above `mu_min` with a parabolic refinement on log power.
+fn refine_peak(mus: &[f64], power: &[f64], mu_min: f64) -> Option<(f64, f64)> {
+    let start = mus.iter().position(|&m| m >= mu_min)?;
+    let (k, &pk) = power
+        .iter()
+        .enumerate()
+        .skip(start)
+        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    let mut sorted: Vec<f64> = power[start..].to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2].max(1e-300);
+    let mut mu = mus[k];
+    if k > 0 && k + 1 < power.len() {
+        let (a, b, c) = (
+            power[k - 1].max(1e-300).ln(),
+            pk.max(1e-300).ln(),
+            power[k + 1].max(1e-300).ln(),
+        );
+        let denom = a - 2.0 * b + c;
+        if denom < 0.0 {
+            mu += 0.5 * (a - c) / denom * (mus[k + 1] - mus[k]);
+        }
+    }
+    Some((mu, pk / median))
+}

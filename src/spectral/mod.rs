@@ -1,0 +1,96 @@
+//! The spectral solver: for every camera pixel, the screen points S1 (front
+//! reflection) and S2 (back reflection) from the pixel's intensity over the
+//! pattern schedule, with their uncertainty and quality maps.
+//!
+//! Per pixel ([`pixel`]): periodogram peaks per direction give the merged
+//! centre; the station's geometry (a flat plate traced through the nominal
+//! station) gives the expected back-minus-front offset, which seeds the two
+//! screen points and later names them; Levenberg–Marquardt fits the joint
+//! model of all directions ([`model`]) with one, two and optionally three
+//! reflections; the Bayesian information criterion
+//! `BIC = N ln(RSS/N) + p ln N` picks the model. Uncertainties are
+//! `σ̂² (JᵀJ)⁻¹` with `σ̂² = RSS/(N − p)`: the Cramér–Rao bound of the fitted
+//! model at the noise level the residuals show.
+
+pub mod init;
+pub mod model;
+pub mod pixel;
+mod solver;
+
+pub use solver::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
+
+use nalgebra::DMatrix;
+
+use model::Params;
+
+/// Per-pixel flag bits (`flags.npy`).
+pub mod flags {
+    /// Outside the pixels the station predicts to see the element, or too few samples.
+    pub const NO_DATA: u16 = 1;
+    /// No fringe signal in at least one direction.
+    pub const NO_SIGNAL: u16 = 2;
+    /// Saturated or clipped samples were excluded from the fit.
+    pub const SATURATED: u16 = 4;
+    /// One reflection modelled (opaque element, reference flat, AR-coated back).
+    pub const ONE_REFLECTION: u16 = 8;
+    /// Three reflections modelled (second internal round trip, paper §5.1b).
+    pub const THREE_REFLECTIONS: u16 = 16;
+    /// The reflections cannot be separated with this schedule: both NaN.
+    pub const UNRESOLVED: u16 = 32;
+    /// The fitted back-minus-front offset disagrees with the geometry by more
+    /// than half its size: both NaN rather than a possibly swapped answer.
+    pub const OFFSET_MISMATCH: u16 = 64;
+    /// Levenberg–Marquardt stopped at its iteration cap.
+    pub const NOT_CONVERGED: u16 = 128;
+    /// Every model needed a negative amplitude: no physical fit.
+    pub const NEGATIVE_AMPLITUDE: u16 = 256;
+}
+
+/// The solver's answer for one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelResult {
+    /// `(u, v)` of the front and back reflection, NaN when not found.
+    pub s: [[f64; 2]; 2],
+    /// Standard deviations of those coordinates, screen px.
+    pub std: [[f64; 2]; 2],
+    /// Background A and amplitudes B1, B2, B3, counts (NaN when absent).
+    pub amp: [f64; 4],
+    /// Fitted τ_max.
+    pub tau_max: f64,
+    /// RMS of the residuals, counts.
+    pub residual_rms: f64,
+    /// Separation of the two reflections, smallest over the directions, in Fourier bins.
+    pub separation_bins: f64,
+    /// Number of reflections in the chosen model (0: none).
+    pub model: u8,
+    /// [`flags`] bits.
+    pub flags: u16,
+    /// LM iterations of the chosen model.
+    pub iterations: u16,
+}
+
+impl PixelResult {
+    /// Nothing found.
+    pub fn empty() -> Self {
+        PixelResult {
+            s: [[f64::NAN; 2]; 2],
+            std: [[f64::NAN; 2]; 2],
+            amp: [f64::NAN; 4],
+            tau_max: f64::NAN,
+            residual_rms: f64::NAN,
+            separation_bins: f64::NAN,
+            model: 0,
+            flags: 0,
+            iterations: 0,
+        }
+    }
+
+    /// Puts reflection `which` of `p` into slot `slot` (0 front, 1 back).
+    fn set(&mut self, slot: usize, p: &Params, which: usize, cov: Option<&DMatrix<f64>>) {
+        self.s[slot] = p.uv[which];
+        if let Some(c) = cov {
+            let u = p.u_index(which);
+            self.std[slot] = [c[(u, u)].max(0.0).sqrt(), c[(u + 1, u + 1)].max(0.0).sqrt()];
+        }
+    }
+}

@@ -1,0 +1,395 @@
+//! One pixel from its series to its screen points: starting values from the
+//! spectrum and the station geometry, fits with one, two and (optionally)
+//! three reflections, a choice among them by the Bayesian information
+//! criterion, labels from physics, and uncertainties from the Fisher
+//! information at the residuals' noise level.
+
+use nalgebra::DMatrix;
+
+use super::init::SpectrumPlans;
+use super::model::{levenberg_marquardt, linear_amplitudes, Design, Fit, Params, MAX_REFLECTIONS};
+use super::{flags, PixelResult};
+use crate::trace::PixelPaths;
+
+/// Peak-to-median power below which a direction carries no fringe signal.
+/// For pure noise the periodogram's maximum over ~10³ bins sits ~10× the
+/// median (exponential order statistics: ln 1000 / ln 2); 30 is far above it.
+pub const DETECTION_RATIO: f64 = 30.0;
+
+/// What the pixel fit needs besides the series.
+pub struct PixelContext<'a> {
+    /// The schedule.
+    pub design: &'a Design,
+    /// Periodogram plans.
+    pub plans: &'a SpectrumPlans,
+    /// The station's prediction for this pixel (flat surfaces).
+    pub prior: &'a PixelPaths,
+    /// Starting κ = 1/τ_max².
+    pub kappa0: f64,
+    /// Whether a third reflection may be modelled.
+    pub allow_third: bool,
+    /// LM iteration cap.
+    pub max_iter: usize,
+}
+
+fn solve_centre(ctx: &PixelContext, mus: &[f64]) -> Option<[f64; 2]> {
+    // Least squares of a_d u + b_d v = μ_d − c_d over the directions.
+    let (mut saa, mut sab, mut sbb, mut sar, mut sbr) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (ax, &mu) in ctx.design.axes.iter().zip(mus) {
+        let r = mu - ax.c;
+        saa += ax.a * ax.a;
+        sab += ax.a * ax.b;
+        sbb += ax.b * ax.b;
+        sar += ax.a * r;
+        sbr += ax.b * r;
+    }
+    let det = saa * sbb - sab * sab;
+    if det.abs() < 1e-12 * (saa * sbb).max(1e-300) {
+        return None;
+    }
+    Some([(sbb * sar - sab * sbr) / det, (saa * sbr - sab * sar) / det])
+}
+
+fn start(k: usize, uv: &[[f64; 2]], kappa: f64) -> Params {
+    let mut p = Params {
+        k,
+        offset: 0.0,
+        amp: [0.0; MAX_REFLECTIONS],
+        uv: [[0.0; 2]; MAX_REFLECTIONS],
+        kappa,
+    };
+    p.uv[..k].copy_from_slice(&uv[..k]);
+    p
+}
+
+/// Starting pair for two reflections. Per direction d, the merged peak μ_d
+/// lies between the two (or on one when they are resolved): scan the pair
+/// `(μ_d + t δ_d, μ_d + (t + 1) δ_d)`, δ_d the expected offset projected on
+/// the direction, t ∈ [−1.25, 0.25], and keep the best linear fit with
+/// positive amplitudes on that direction's frames alone. Directions are
+/// scanned apart because each one's peak is biased along its own axis.
+fn pair_start(
+    ctx: &PixelContext,
+    index: &[u32],
+    y: &[f64],
+    mus: &[f64],
+    d: &[f64; 2],
+    kappa: f64,
+) -> Params {
+    let mut pair_mu = vec![[0.0; 2]; mus.len()];
+    for (dir, ax) in ctx.design.axes.iter().enumerate() {
+        let (idx, yd): (Vec<u32>, Vec<f64>) = index
+            .iter()
+            .zip(y)
+            .filter(|(&i, _)| ctx.design.frames[i as usize].dir == dir)
+            .map(|(&i, &v)| (i, v))
+            .unzip();
+        let delta = ax.a * d[0] + ax.b * d[1];
+        let norm2 = ax.a * ax.a + ax.b * ax.b;
+        // A screen point whose coordinate on this axis is μ (the other is free).
+        let point = |mu: f64| [(mu - ax.c) * ax.a / norm2, (mu - ax.c) * ax.b / norm2];
+        let mut best = (f64::INFINITY, [mus[dir], mus[dir] + delta]);
+        for k in 0..=12 {
+            let t = -1.25 + 0.125 * f64::from(k);
+            let m = [mus[dir] + t * delta, mus[dir] + (t + 1.0) * delta];
+            let (p, rss) = linear_amplitudes(
+                ctx.design,
+                &idx,
+                &yd,
+                &start(2, &[point(m[0]), point(m[1])], kappa),
+            );
+            if p.amp[0] > 0.0 && p.amp[1] > 0.0 && rss < best.0 {
+                best = (rss, m);
+            }
+        }
+        pair_mu[dir] = best.1;
+    }
+    let s1 =
+        solve_centre(ctx, &pair_mu.iter().map(|m| m[0]).collect::<Vec<_>>()).unwrap_or_default();
+    let s2 =
+        solve_centre(ctx, &pair_mu.iter().map(|m| m[1]).collect::<Vec<_>>()).unwrap_or_default();
+    start(2, &[s1, s2], kappa)
+}
+
+struct Candidate {
+    fit: Fit,
+    bic: f64,
+}
+
+fn fit_from(ctx: &PixelContext, index: &[u32], y: &[f64], starts: &[Params]) -> Candidate {
+    // The best start with physical (positive) amplitudes; a start whose
+    // linear fit needs a negative one sits in an unphysical basin.
+    let scored: Vec<(Params, f64)> = starts
+        .iter()
+        .map(|s| linear_amplitudes(ctx.design, index, y, s))
+        .collect();
+    let positive = |p: &Params| p.amp[..p.k].iter().all(|&b| b > 0.0);
+    let (best_start, _) = scored
+        .iter()
+        .filter(|(p, _)| positive(p))
+        .chain(scored.iter())
+        .min_by(|a, b| {
+            (!positive(&a.0), a.1)
+                .partial_cmp(&(!positive(&b.0), b.1))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        })
+        .copied()
+        .expect("at least one start");
+    let fit = levenberg_marquardt(ctx.design, index, y, best_start, ctx.max_iter);
+    let n = index.len() as f64;
+    let bic = n * (fit.rss / n).max(1e-300).ln() + fit.params.len() as f64 * n.ln();
+    Candidate { fit, bic }
+}
+
+fn offset(prior: &PixelPaths, a: usize, b: usize) -> Option<[f64; 2]> {
+    let paths = [prior.front, prior.back, prior.third];
+    match (paths[a], paths[b]) {
+        (Ok(p), Ok(q)) => Some([q.u - p.u, q.v - p.v]),
+        _ => None,
+    }
+}
+
+/// A pixel's result under one model, with that model's BIC.
+#[derive(Debug, Clone, Copy)]
+pub struct Scored {
+    /// The result if this model is chosen.
+    pub result: PixelResult,
+    /// `N ln(RSS/N) + p ln N`.
+    pub bic: f64,
+}
+
+/// A pixel fitted with every model that applies (index K − 1), or the
+/// reason none could be: `base` carries the flags that hold whatever the model.
+#[derive(Debug, Clone, Copy)]
+pub struct PixelFits {
+    /// Results per number of reflections.
+    pub per_model: [Option<Scored>; MAX_REFLECTIONS],
+    /// Result when no model applies (no data, no signal), else the common flags.
+    pub base: PixelResult,
+}
+
+/// Fits one pixel with one, two and (when allowed) three reflections. `y`
+/// is indexed by frame, NaN where a sample is excluded.
+pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> PixelFits {
+    let mut out = PixelFits {
+        per_model: [None; MAX_REFLECTIONS],
+        base: PixelResult::empty(),
+    };
+    if excluded > 0 {
+        out.base.flags |= flags::SATURATED;
+    }
+    let index: Vec<u32> = (0..y_by_frame.len() as u32)
+        .filter(|&i| y_by_frame[i as usize].is_finite())
+        .collect();
+    let y: Vec<f64> = index.iter().map(|&i| y_by_frame[i as usize]).collect();
+    if index.len() < 4 * (3 * MAX_REFLECTIONS + 2) {
+        out.base.flags |= flags::NO_DATA;
+        return out;
+    }
+    let mut mus = Vec::new();
+    for d in 0..ctx.design.axes.len() {
+        match ctx.plans.peak(d, y_by_frame) {
+            Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(mu),
+            _ => {
+                out.base.flags |= flags::NO_SIGNAL;
+                return out;
+            }
+        }
+    }
+    let Some(centre) = solve_centre(ctx, &mus) else {
+        out.base.flags |= flags::NO_DATA;
+        return out;
+    };
+    let one = fit_from(ctx, &index, &y, &[start(1, &[centre], ctx.kappa0)]);
+    let d12 = offset(ctx.prior, 0, 1);
+    let mut two = None;
+    let mut three = None;
+    if let Some(d) = d12 {
+        let mut best = fit_from(
+            ctx,
+            &index,
+            &y,
+            &[pair_start(ctx, &index, &y, &mus, &d, ctx.kappa0)],
+        );
+        if best.bic >= one.bic {
+            // Search for the pair once more around the single point, so that
+            // a pair the first search missed is not scored as one reflection.
+            let p = one.fit.params.uv[0];
+            let mus1: Vec<f64> = ctx.design.axes.iter().map(|ax| ax.s(p[0], p[1])).collect();
+            let again = fit_from(
+                ctx,
+                &index,
+                &y,
+                &[pair_start(ctx, &index, &y, &mus1, &d, ctx.kappa0)],
+            );
+            if again.fit.rss < best.fit.rss {
+                best = again;
+            }
+        }
+        if ctx.allow_third {
+            if let Some(d3) = offset(ctx.prior, 1, 2) {
+                let p = best.fit.params;
+                let s3 = [p.uv[1][0] + d3[0], p.uv[1][1] + d3[1]];
+                three = Some(fit_from(
+                    ctx,
+                    &index,
+                    &y,
+                    &[start(3, &[p.uv[0], p.uv[1], s3], p.kappa)],
+                ));
+            }
+        }
+        two = Some(best);
+    }
+    for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
+        out.per_model[k] = cand.map(|c| Scored {
+            result: finalize(ctx, &c, &index, d12, out.base),
+            bic: c.bic,
+        });
+    }
+    out
+}
+
+/// The pixel's result under the candidate's model: labels from physics,
+/// checks, uncertainties.
+fn finalize(
+    ctx: &PixelContext,
+    cand: &Candidate,
+    index: &[u32],
+    d12: Option<[f64; 2]>,
+    base: PixelResult,
+) -> PixelResult {
+    let mut out = base;
+    let fit = &cand.fit;
+    let p = fit.params;
+    let n = index.len();
+    if p.amp[..p.k].iter().any(|&b| b <= 0.0) {
+        out.flags |= flags::NEGATIVE_AMPLITUDE;
+        return out;
+    }
+    out.model = p.k as u8;
+    out.iterations = fit.iterations as u16;
+    out.residual_rms = (fit.rss / n as f64).sqrt();
+    out.tau_max = if p.kappa > 0.0 {
+        p.kappa.sqrt().recip()
+    } else {
+        f64::INFINITY
+    };
+    out.amp[0] = p.offset;
+    if !fit.converged {
+        out.flags |= flags::NOT_CONVERGED;
+    }
+    let sigma2 = fit.rss / (n - p.len()).max(1) as f64;
+    let cov = fit.jtj.clone().try_inverse().map(|m| m * sigma2);
+    if p.k == 1 {
+        out.flags |= flags::ONE_REFLECTION;
+        // No back path predicted: the one reflection is the front.
+        let Some(d) = d12 else {
+            out.set(0, &p, 0, cov.as_ref());
+            out.amp[1] = p.amp[0];
+            return out;
+        };
+        // One reflection, or two this schedule cannot tell apart? Only if a
+        // back reflection of the expected strength at the expected offset
+        // would have been resolved is its absence real (AR-coated back).
+        out.separation_bins = separation_bins(ctx, &d);
+        if !would_resolve(ctx, index, &p, &d, sigma2) {
+            out.flags |= flags::UNRESOLVED;
+            return out;
+        }
+        let dist = |q: Result<crate::trace::ScreenHit, crate::trace::Miss>| {
+            q.map_or(f64::INFINITY, |h| {
+                (p.uv[0][0] - h.u).hypot(p.uv[0][1] - h.v)
+            })
+        };
+        let slot = usize::from(dist(ctx.prior.back) < dist(ctx.prior.front));
+        out.set(slot, &p, 0, cov.as_ref());
+        out.amp[1 + slot] = p.amp[0];
+        return out;
+    }
+    if p.k == 3 {
+        out.flags |= flags::THREE_REFLECTIONS;
+        out.amp[3] = p.amp[2];
+    }
+    let d = d12.unwrap_or([1.0, 0.0]);
+    let sep = [p.uv[1][0] - p.uv[0][0], p.uv[1][1] - p.uv[0][1]];
+    let (i0, i1) = if sep[0] * d[0] + sep[1] * d[1] >= 0.0 {
+        (0, 1)
+    } else {
+        (1, 0)
+    };
+    let sep = [p.uv[i1][0] - p.uv[i0][0], p.uv[i1][1] - p.uv[i0][1]];
+    out.separation_bins = separation_bins(ctx, &sep);
+    // Resolved: the expected separation exceeds three standard deviations
+    // of the fitted one. Consistent: the fitted offset is within half the
+    // expected one (plus three σ) of it — farther, it could be a swap or a
+    // spurious pair, and neither point is reported.
+    let sd = cov
+        .as_ref()
+        .map_or(f64::INFINITY, |c| separation_std(c, &p, i0, i1));
+    let expected = d[0].hypot(d[1]);
+    if 3.0 * sd > expected {
+        out.flags |= flags::UNRESOLVED;
+        return out;
+    }
+    if (sep[0] - d[0]).hypot(sep[1] - d[1]) > 0.5 * expected + 3.0 * sd {
+        out.flags |= flags::OFFSET_MISMATCH;
+        return out;
+    }
+    out.set(0, &p, i0, cov.as_ref());
+    out.set(1, &p, i1, cov.as_ref());
+    out.amp[1] = p.amp[i0];
+    out.amp[2] = p.amp[i1];
+    out
+}
+
+/// Whether a pair with the predicted offset `d` and Fresnel amplitude ratio,
+/// centred on the single fitted point, would be separated at noise `sigma2`:
+/// the Cramér–Rao σ of its separation below a third of the separation.
+fn would_resolve(
+    ctx: &PixelContext,
+    index: &[u32],
+    one: &Params,
+    d: &[f64; 2],
+    sigma2: f64,
+) -> bool {
+    let w = match (ctx.prior.front, ctx.prior.back) {
+        (Ok(f), Ok(b)) => b.weight / (f.weight + b.weight),
+        _ => 0.5,
+    };
+    let c = one.uv[0];
+    let mut p = start(
+        2,
+        &[
+            [c[0] - w * d[0], c[1] - w * d[1]],
+            [c[0] + (1.0 - w) * d[0], c[1] + (1.0 - w) * d[1]],
+        ],
+        one.kappa,
+    );
+    p.offset = one.offset;
+    p.amp[0] = one.amp[0] * (1.0 - w);
+    p.amp[1] = one.amp[0] * w;
+    let zeros = vec![0.0; index.len()];
+    let ne = super::model::normal_equations(ctx.design, index, &zeros, &p);
+    match ne.jtj.try_inverse() {
+        Some(inv) => separation_std(&(inv * sigma2), &p, 0, 1) * 3.0 < d[0].hypot(d[1]),
+        None => false,
+    }
+}
+
+/// Smallest separation over the directions, in Fourier bins, of two screen
+/// points `d` apart.
+fn separation_bins(ctx: &PixelContext, d: &[f64; 2]) -> f64 {
+    ctx.design
+        .axes
+        .iter()
+        .enumerate()
+        .map(|(k, ax)| (ax.a * d[0] + ax.b * d[1]).abs() / ctx.plans.bin(k))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Standard deviation of |S_i1 − S_i0| from the covariance.
+fn separation_std(cov: &DMatrix<f64>, p: &Params, i0: usize, i1: usize) -> f64 {
+    let (a, b) = (p.u_index(i0), p.u_index(i1));
+    let var = |x: usize, y: usize| cov[(x, x)] + cov[(y, y)] - 2.0 * cov[(x, y)];
+    (var(a, b) + var(a + 1, b + 1)).max(0.0).sqrt()
+}

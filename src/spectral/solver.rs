@@ -1,0 +1,493 @@
+//! The solver's driver: frames arrive in capture order, the samples of the
+//! pixels that can see the element are kept (pixel-major, 2 bytes each),
+//! and every pixel is fitted on all cores once its series is complete.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use super::init::SpectrumPlans;
+use super::model::{Axis, Design, FrameMeta};
+use super::pixel::{fit_pixel, PixelContext, PixelFits};
+use super::{flags, PixelResult};
+use crate::acquisition::FrameInfo;
+use crate::npy::{self, NpyError};
+use crate::patterns::FringeAxis;
+use crate::station::Station;
+use crate::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use crate::zernike::ZernikeSurface;
+
+/// Frames buffered frame-major before they are transposed into the
+/// pixel-major series (keeps the scatter cache-friendly).
+const BLOCK: usize = 32;
+
+/// What can go wrong in the spectral stage.
+#[derive(Debug, thiserror::Error)]
+pub enum SpectralError {
+    /// The schedule cannot locate screen points.
+    #[error("schedule: {problem}")]
+    Schedule {
+        /// What is wrong.
+        problem: String,
+    },
+    /// A frame does not fit the acquisition.
+    #[error("frame {frame}: {problem}")]
+    Frame {
+        /// Frame index.
+        frame: usize,
+        /// What is wrong.
+        problem: String,
+    },
+    /// Writing a map failed.
+    #[error(transparent)]
+    Npy(#[from] NpyError),
+}
+
+/// Settings of the spectral stage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpectralConfig {
+    /// Starting τ_max of the modulation falloff; `None`: the schedule's largest τ.
+    pub tau_max_guess: Option<f64>,
+    /// Allow a third reflection (second internal round trip).
+    pub third_reflection: bool,
+    /// Samples at or above this count are excluded; `None`: the largest count
+    /// seen, when it is a full scale 2^b − 1 (b = 8, 10, 12, 14, 16).
+    pub saturation_counts: Option<u16>,
+    /// Pixels within this many camera pixels of where the station predicts the
+    /// element are fitted; farther ones are reported as no data.
+    pub margin_px: u32,
+    /// Rim of the element beyond the aperture, mm (for the prediction).
+    pub edge_margin_mm: f64,
+    /// Levenberg–Marquardt iteration cap.
+    pub max_iter: usize,
+    /// Only fit camera pixels in `[x0, x1) × [y0, y1)` (columns, rows).
+    pub roi: Option<[u32; 4]>,
+}
+
+impl Default for SpectralConfig {
+    fn default() -> Self {
+        SpectralConfig {
+            tau_max_guess: None,
+            third_reflection: false,
+            saturation_counts: None,
+            margin_px: 4,
+            edge_margin_mm: DEFAULT_EDGE_MARGIN_MM,
+            max_iter: 100,
+            roi: None,
+        }
+    }
+}
+
+/// The per-pixel results of a whole image.
+#[derive(Debug, Clone)]
+pub struct SpectralMaps {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Row-major results under the scene's model.
+    pub pixels: Vec<PixelResult>,
+    /// Per pixel, the number of reflections its own BIC prefers (0: none fitted).
+    pub preferred: Vec<u8>,
+    /// Reflections in the model chosen for the scene.
+    pub scene_model: u8,
+    /// BIC summed over the compared pixels for 1, 2, 3 reflections (0 when not compared).
+    pub bic_sums: [f64; 3],
+    /// Saturation level used, counts.
+    pub saturation_counts: Option<u16>,
+}
+
+/// The streaming spectral solver of one acquisition.
+pub struct SpectralSolver {
+    width: usize,
+    height: usize,
+    design: Design,
+    plans: SpectrumPlans,
+    prior: TracedView,
+    candidates: Vec<u32>,
+    series: Vec<u16>,
+    block: Vec<u16>,
+    block_start: usize,
+    received: usize,
+    max_seen: u16,
+    config: SpectralConfig,
+}
+
+impl SpectralSolver {
+    /// Prepares for `frames` (capture order) of `station`.
+    ///
+    /// # Errors
+    /// [`SpectralError::Schedule`] when fewer than two non-parallel directions.
+    pub fn new(
+        station: &Station,
+        frames: &[FrameInfo],
+        config: SpectralConfig,
+    ) -> Result<Self, SpectralError> {
+        let design = design(station, frames)?;
+        let plans = SpectrumPlans::new(&design);
+        let e = &station.element;
+        let flat = ZernikeSurface::flat(
+            e.aperture_radius_mm,
+            [e.aperture_center_mm.x, e.aperture_center_mm.y],
+        )
+        .map_err(|err| SpectralError::Schedule {
+            problem: err.to_string(),
+        })?;
+        let plate = Plate::new(station, flat.clone(), flat, config.edge_margin_mm);
+        let prior = TracedView::trace(station, &plate);
+        let mut candidates = candidates(&prior, config.margin_px as i64);
+        if let Some([x0, y0, x1, y1]) = config.roi {
+            let w = prior.width as u32;
+            candidates.retain(|&p| (x0..x1).contains(&(p % w)) && (y0..y1).contains(&(p / w)));
+        }
+        Ok(SpectralSolver {
+            width: prior.width,
+            height: prior.height,
+            series: vec![0; candidates.len() * frames.len()],
+            block: Vec::with_capacity(BLOCK * candidates.len()),
+            block_start: 0,
+            candidates,
+            design,
+            plans,
+            prior,
+            received: 0,
+            max_seen: 0,
+            config,
+        })
+    }
+
+    /// Pixels that will be fitted.
+    pub fn candidate_pixels(&self) -> usize {
+        self.candidates.len()
+    }
+
+    /// Frames expected.
+    pub fn frames(&self) -> usize {
+        self.design.frames.len()
+    }
+
+    /// Bytes held for the series.
+    pub fn series_bytes(&self) -> usize {
+        self.series.len() * 2
+    }
+
+    /// Takes frame `index`, which must be the next in capture order.
+    ///
+    /// # Errors
+    /// [`SpectralError::Frame`] for an out-of-order or wrongly sized frame.
+    pub fn push_frame(&mut self, index: usize, frame: &[u16]) -> Result<(), SpectralError> {
+        if index != self.received || index >= self.frames() {
+            return Err(SpectralError::Frame {
+                frame: index,
+                problem: format!("expected frame {} of {}", self.received, self.frames()),
+            });
+        }
+        if frame.len() != self.width * self.height {
+            return Err(SpectralError::Frame {
+                frame: index,
+                problem: format!(
+                    "{} pixels, expected {}x{}",
+                    frame.len(),
+                    self.width,
+                    self.height
+                ),
+            });
+        }
+        for &p in &self.candidates {
+            let v = frame[p as usize];
+            self.max_seen = self.max_seen.max(v);
+            self.block.push(v);
+        }
+        self.received += 1;
+        if self.received - self.block_start == BLOCK || self.received == self.frames() {
+            self.flush();
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) {
+        let n = self.frames();
+        let c = self.candidates.len();
+        let rows = self.received - self.block_start;
+        for q in 0..c {
+            let dst = &mut self.series[q * n + self.block_start..q * n + self.received];
+            for (r, d) in dst.iter_mut().enumerate().take(rows) {
+                *d = self.block[r * c + q];
+            }
+        }
+        self.block.clear();
+        self.block_start = self.received;
+    }
+
+    fn saturation(&self) -> Option<u16> {
+        self.config.saturation_counts.or_else(|| {
+            [8u32, 10, 12, 14, 16]
+                .iter()
+                .map(|&b| ((1u32 << b) - 1) as u16)
+                .find(|&fs| fs == self.max_seen)
+        })
+    }
+
+    /// Fits every pixel (all cores) once all frames are in.
+    ///
+    /// # Errors
+    /// [`SpectralError::Frame`] when frames are missing.
+    pub fn solve(&self) -> Result<SpectralMaps, SpectralError> {
+        if self.received != self.frames() {
+            return Err(SpectralError::Frame {
+                frame: self.received,
+                problem: format!(
+                    "missing: only {} of {} frames arrived",
+                    self.received,
+                    self.frames()
+                ),
+            });
+        }
+        let n = self.frames();
+        let sat = self.saturation();
+        let kappa0 = self
+            .config
+            .tau_max_guess
+            .unwrap_or_else(|| self.design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
+            .powi(-2);
+        let results: Vec<(u32, PixelFits)> = self
+            .candidates
+            .par_iter()
+            .enumerate()
+            .with_min_len(16)
+            .map(|(q, &p)| {
+                let raw = &self.series[q * n..(q + 1) * n];
+                let mut excluded = 0;
+                let y: Vec<f64> = raw
+                    .iter()
+                    .map(|&v| {
+                        if v == 0 || sat.is_some_and(|s| v >= s) {
+                            excluded += 1;
+                            f64::NAN
+                        } else {
+                            f64::from(v)
+                        }
+                    })
+                    .collect();
+                let ctx = PixelContext {
+                    design: &self.design,
+                    plans: &self.plans,
+                    prior: &self.prior.pixels[p as usize],
+                    kappa0,
+                    allow_third: self.config.third_reflection,
+                    max_iter: self.config.max_iter,
+                };
+                (p, fit_pixel(&ctx, &y, excluded))
+            })
+            .collect();
+        let (scene_model, bic_sums) = scene_model(&results, self.config.third_reflection);
+        let mut pixels = vec![
+            PixelResult {
+                flags: flags::NO_DATA,
+                ..PixelResult::empty()
+            };
+            self.width * self.height
+        ];
+        let mut preferred = vec![0u8; self.width * self.height];
+        for (p, fits) in results {
+            // The scene's model where it applies; where the geometry allows
+            // fewer reflections (the back path leaves through the rim), the
+            // largest model that applies.
+            let chosen = fits.per_model[..scene_model].iter().rev().flatten().next();
+            pixels[p as usize] = chosen.map_or(fits.base, |c| c.result);
+            preferred[p as usize] = fits
+                .per_model
+                .iter()
+                .enumerate()
+                .filter_map(|(k, c)| c.map(|c| (k + 1, c.bic)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map_or(0, |(k, _)| k as u8);
+        }
+        Ok(SpectralMaps {
+            width: self.width,
+            height: self.height,
+            pixels,
+            preferred,
+            scene_model: scene_model as u8,
+            bic_sums,
+            saturation_counts: sat,
+        })
+    }
+
+    /// The model's view of the schedule.
+    pub fn design(&self) -> &Design {
+        &self.design
+    }
+
+    /// The geometry prior (flat surfaces through the nominal station).
+    pub fn prior(&self) -> &TracedView {
+        &self.prior
+    }
+}
+
+/// The scene's number of reflections: the model with the smallest BIC summed
+/// over the pixels where every compared model was fitted (a pixel's
+/// log-likelihoods add up over the scene). Returns it with the sums.
+fn scene_model(results: &[(u32, PixelFits)], allow_third: bool) -> (usize, [f64; 3]) {
+    let top = if allow_third { 3 } else { 2 };
+    let mut sums = [0.0; 3];
+    for (_, f) in results {
+        if f.per_model[..top].iter().all(Option::is_some) {
+            for (k, c) in f.per_model[..top].iter().enumerate() {
+                sums[k] += c.map_or(0.0, |c| c.bic);
+            }
+        }
+    }
+    let best = (1..top).fold(0, |b, k| if sums[k] < sums[b] { k } else { b });
+    // With no pixel fitted under every model, fall back to the largest.
+    let chosen = if sums.iter().all(|&v| v == 0.0) {
+        top
+    } else {
+        best + 1
+    };
+    (chosen, sums)
+}
+
+fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, SpectralError> {
+    let mut directions_deg: Vec<f64> = Vec::new();
+    let mut metas = Vec::with_capacity(frames.len());
+    for f in frames {
+        let dir = match directions_deg.iter().position(|&d| d == f.direction_deg) {
+            Some(d) => d,
+            None => {
+                directions_deg.push(f.direction_deg);
+                directions_deg.len() - 1
+            }
+        };
+        metas.push(FrameMeta {
+            tau: f.tau,
+            phase_cycles: f.phase_rad / std::f64::consts::TAU,
+            dir,
+        });
+    }
+    let axes: Vec<Axis> = directions_deg
+        .iter()
+        .map(|&d| {
+            Axis::from_fringe(&FringeAxis::new(
+                d,
+                station.screen.width,
+                station.screen.height,
+            ))
+        })
+        .collect();
+    let spread = axes
+        .iter()
+        .flat_map(|a| {
+            axes.iter()
+                .map(move |b| (a.a * b.b - a.b * b.a).abs() / (a.a.hypot(a.b) * b.a.hypot(b.b)))
+        })
+        .fold(0.0, f64::max);
+    if spread < 0.1 {
+        return Err(SpectralError::Schedule {
+            problem: format!(
+                "directions {directions_deg:?} are (nearly) parallel: two non-parallel fringe \
+                 directions are needed to locate a screen point in u and v"
+            ),
+        });
+    }
+    Ok(Design {
+        frames: metas,
+        axes,
+        directions_deg,
+    })
+}
+
+/// Pixels whose front or back path exists in the prior, grown by `margin` px.
+fn candidates(prior: &TracedView, margin: i64) -> Vec<u32> {
+    let (w, h) = (prior.width as i64, prior.height as i64);
+    let mut mask = vec![false; prior.pixels.len()];
+    for (k, p) in prior.pixels.iter().enumerate() {
+        if p.front.is_err() && p.back.is_err() {
+            continue;
+        }
+        let (i, j) = (k as i64 % w, k as i64 / w);
+        for dj in -margin..=margin {
+            for di in -margin..=margin {
+                let (x, y) = (i + di, j + dj);
+                if (0..w).contains(&x) && (0..h).contains(&y) {
+                    mask[(y * w + x) as usize] = true;
+                }
+            }
+        }
+    }
+    (0..mask.len() as u32)
+        .filter(|&k| mask[k as usize])
+        .collect()
+}
+
+impl SpectralMaps {
+    /// `[rows, columns, 2, 2]` screen coordinates (spec layout).
+    pub fn screen_coords(&self) -> Vec<f64> {
+        self.pixels
+            .iter()
+            .flat_map(|p| [p.s[0][0], p.s[0][1], p.s[1][0], p.s[1][1]])
+            .collect()
+    }
+
+    /// Writes `screen_coords.npy` and the quality maps into `dir`.
+    ///
+    /// # Errors
+    /// [`SpectralError::Npy`] naming the file.
+    pub fn write(&self, dir: &Path) -> Result<(), SpectralError> {
+        let (h, w) = (self.height, self.width);
+        let px = &self.pixels;
+        npy::write_f64(
+            &dir.join("screen_coords.npy"),
+            &[h, w, 2, 2],
+            &self.screen_coords(),
+        )?;
+        let std: Vec<f64> = px
+            .iter()
+            .flat_map(|p| [p.std[0][0], p.std[0][1], p.std[1][0], p.std[1][1]])
+            .collect();
+        npy::write_f64(&dir.join("screen_std.npy"), &[h, w, 2, 2], &std)?;
+        let amp: Vec<f64> = px.iter().flat_map(|p| p.amp).collect();
+        npy::write_f64(&dir.join("amplitudes.npy"), &[h, w, 4], &amp)?;
+        let scalar = |f: fn(&PixelResult) -> f64| px.iter().map(f).collect::<Vec<f64>>();
+        npy::write_f64(&dir.join("tau_max.npy"), &[h, w], &scalar(|p| p.tau_max))?;
+        npy::write_f64(
+            &dir.join("residual_rms.npy"),
+            &[h, w],
+            &scalar(|p| p.residual_rms),
+        )?;
+        npy::write_f64(
+            &dir.join("separation_bins.npy"),
+            &[h, w],
+            &scalar(|p| p.separation_bins),
+        )?;
+        npy::write_u8(
+            &dir.join("reflections.npy"),
+            &[h, w],
+            &px.iter().map(|p| p.model).collect::<Vec<u8>>(),
+        )?;
+        npy::write_u8(
+            &dir.join("preferred_reflections.npy"),
+            &[h, w],
+            &self.preferred,
+        )?;
+        npy::write_u16(
+            &dir.join("flags.npy"),
+            &[h, w],
+            &px.iter().map(|p| p.flags).collect::<Vec<u16>>(),
+        )?;
+        npy::write_u16(
+            &dir.join("iterations.npy"),
+            &[h, w],
+            &px.iter().map(|p| p.iterations).collect::<Vec<u16>>(),
+        )?;
+        Ok(())
+    }
+
+    /// Pixels with both screen points found.
+    pub fn found_both(&self) -> usize {
+        self.pixels
+            .iter()
+            .filter(|p| p.s[0][0].is_finite() && p.s[1][0].is_finite())
+            .count()
+    }
+}
