@@ -6,3 +6,5 @@ cd "$(dirname "$0")/.."
 cargo build --release --locked --quiet
 target/release/mfd bench render --station calib/bench-fill.toml
 target/release/mfd bench render --station calib/paper-sim.toml
+target/release/mfd bench spectral --station calib/bench-fill.toml --pixels 20000
+target/release/mfd bench spectral --station calib/paper-sim.toml --pixels 0

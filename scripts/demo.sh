@@ -27,7 +27,12 @@ echo "== trace: the ideal screen points of the same scene"
 $mfd trace --station calib/paper-sim.toml --surfaces "$out/acquisition/truth/truth_surfaces.json" \
   --out "$out/trace"
 
-echo "== figures"
-# (the trace prints the S2 - S1 offsets and their separation in Fourier bins)
+echo "== reconstruct: screen points S1, S2 from the frames (spectral stage; a few minutes on 2 cores)"
+$mfd reconstruct "$out/acquisition" --out "$out/result"
+
+echo "== figures: the reconstruction against the simulation's truth"
+$mfd compare --screen-coords "$out/result/screen_coords.npy" \
+  --truth "$out/acquisition/truth/truth_screen_coords.npy" --std "$out/result/screen_std.npy"
 du -sh "$out/acquisition" | awk '{print "   acquisition size: " $1}'
-echo "files: $out/acquisition (frames.npy, acquisition.toml, truth/), $out/trace (screen_coords.npy)"
+echo "files: $out/acquisition (frames.npy, acquisition.toml, truth/), $out/trace (screen_coords.npy),"
+echo "       $out/result (screen_coords.npy, screen_std.npy, quality maps)"

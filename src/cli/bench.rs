@@ -24,6 +24,28 @@ enum BenchKind {
     /// JSON line: trace_s, ms_per_frame (noise-free), ms_per_frame_noisy
     /// (5 % read noise and shot noise), pixels, lit_pixels, frames.
     Render(RenderArgs),
+    /// Stream simulated frames of the paper's schedule through a bounded
+    /// channel into the spectral solver, without disk; prints one JSON line:
+    /// frames_per_s (ingestion), latency_after_last_frame_s (the solve),
+    /// peak_rss_bytes, pixels (fitted), frames, and the solve's µs per pixel.
+    Spectral(SpectralBenchArgs),
+    /// Spectral error against the Cramér–Rao bound over plate thickness and
+    /// refractive index (simulated 48×48 station, paper schedule): a markdown table.
+    Thickness(super::bench_table::TableArgs),
+}
+
+#[derive(Args)]
+struct SpectralBenchArgs {
+    /// Station; the default fills the 1296×966 sensor with the element.
+    #[arg(long, default_value = "calib/bench-fill.toml")]
+    station: PathBuf,
+    /// Fit only a centred square of about this many pixels (the solver
+    /// holds 2 bytes per fitted pixel and frame); 0 for every pixel.
+    #[arg(long, default_value_t = 20_000)]
+    pixels: usize,
+    /// Read noise as a fraction of full scale.
+    #[arg(long, default_value_t = 0.05)]
+    noise: f64,
 }
 
 #[derive(Args)]
@@ -41,16 +63,107 @@ struct RenderArgs {
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     match &args.kind {
         BenchKind::Render(a) => render(a),
+        BenchKind::Spectral(a) => spectral(a),
+        BenchKind::Thickness(a) => super::bench_table::run(a),
     }
+}
+
+/// Peak resident memory of this process (Linux `VmHWM`), bytes.
+fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
+    use mfd::acquisition::FrameInfo;
+    use mfd::spectral::{SpectralConfig, SpectralSolver};
+    let station = Station::load(&args.station)?;
+    let (front, back) = random_surfaces(&station)?;
+    let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
+    let view = TracedView::trace(&station, &plate);
+    let patterns = Schedule::default().patterns();
+    let frames: Vec<FrameInfo> = patterns
+        .iter()
+        .enumerate()
+        .map(|(index, p)| FrameInfo {
+            index,
+            direction_deg: p.direction_deg,
+            tau: p.tau,
+            phase_rad: p.phase_rad,
+        })
+        .collect();
+    let (w, h) = (station.camera.width, station.camera.height);
+    let roi = (args.pixels > 0).then(|| {
+        let side = (args.pixels as f64).sqrt().ceil() as u32;
+        let (x0, y0) = ((w.saturating_sub(side)) / 2, (h.saturating_sub(side)) / 2);
+        [x0, y0, (x0 + side).min(w), (y0 + side).min(h)]
+    });
+    let config = SpectralConfig {
+        roi,
+        ..SpectralConfig::default()
+    };
+    let mut solver = SpectralSolver::new(&station, &frames, config)?;
+    let params = SimParams {
+        noise_frac: args.noise,
+        bit_depth: 12,
+        ..SimParams::default()
+    };
+    let mut cam = SimCamera::new(&view, &station.screen, params)?;
+    // The camera side: a thread renders frames into a bounded ring buffer.
+    let (tx, rx) = crossbeam_channel::bounded::<(usize, Vec<u16>)>(8);
+    let n_pix = station.camera.pixel_count();
+    let producer = std::thread::spawn(move || {
+        for (k, p) in patterns.iter().enumerate() {
+            let mut frame = vec![0u16; n_pix];
+            cam.render(p, k as u64, &mut frame);
+            if tx.send((k, frame)).is_err() {
+                break;
+            }
+        }
+    });
+    let t0 = Instant::now();
+    for (k, frame) in rx.iter() {
+        solver.push_frame(k, &frame)?;
+    }
+    let ingest_s = t0.elapsed().as_secs_f64();
+    producer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the frame producer panicked"))?;
+    let t1 = Instant::now();
+    let maps = solver.solve()?;
+    let solve_s = t1.elapsed().as_secs_f64();
+    let fitted = solver.candidate_pixels();
+    println!(
+        "{{\"bench\":\"spectral\",\"station\":{:?},\"pixels\":{fitted},\"sensor_pixels\":{n_pix},\
+         \"frames\":{},\"frames_per_s\":{:.1},\"latency_after_last_frame_s\":{solve_s:.2},\
+         \"solve_us_per_pixel\":{:.0},\"both_found\":{},\"series_bytes\":{},\"peak_rss_bytes\":{},\"threads\":{}}}",
+        args.station.display().to_string(),
+        frames.len(),
+        frames.len() as f64 / ingest_s,
+        solve_s * 1e6 / fitted.max(1) as f64,
+        maps.found_both(),
+        solver.series_bytes(),
+        peak_rss_bytes().unwrap_or(0),
+        rayon::current_num_threads()
+    );
+    Ok(())
+}
+
+fn random_surfaces(station: &Station) -> anyhow::Result<(ZernikeSurface, ZernikeSurface)> {
+    let e = &station.element;
+    let spec = RandomSurfaceSpec::default();
+    let basis = ZernikeBasis::new(spec.n_terms, e.aperture_radius_mm, [0.0, 0.0])?;
+    Ok((
+        ZernikeSurface::new(basis.clone(), spec.draw(1))?,
+        ZernikeSurface::new(basis, spec.draw(2))?,
+    ))
 }
 
 fn render(args: &RenderArgs) -> anyhow::Result<()> {
     let station = Station::load(&args.station)?;
-    let e = &station.element;
-    let spec = RandomSurfaceSpec::default();
-    let basis = ZernikeBasis::new(spec.n_terms, e.aperture_radius_mm, [0.0, 0.0])?;
-    let front = ZernikeSurface::new(basis.clone(), spec.draw(1))?;
-    let back = ZernikeSurface::new(basis, spec.draw(2))?;
+    let (front, back) = random_surfaces(&station)?;
     let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
     let t0 = Instant::now();
     let view = TracedView::trace(&station, &plate);

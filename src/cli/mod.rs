@@ -1,6 +1,8 @@
 //! Subcommands of the `mfd` binary.
 
 pub mod bench;
+pub mod bench_table;
+pub mod compare;
 pub mod reconstruct;
 pub mod simulate;
 pub mod station;

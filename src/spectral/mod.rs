@@ -12,6 +12,7 @@
 //! `σ̂² (JᵀJ)⁻¹` with `σ̂² = RSS/(N − p)`: the Cramér–Rao bound of the fitted
 //! model at the noise level the residuals show.
 
+pub mod bound;
 pub mod init;
 pub mod model;
 pub mod pixel;
