@@ -1,165 +1,211 @@
-//! Noll indexing and evaluation of Zernike polynomials with gradients by
-//! Jacobi recurrences (no factorial sums), exact to high radial order.
-//!
-//! `R_n^m(ρ) cos mθ = Q(t) Re (X + iY)^m` and `R_n^m(ρ) sin mθ = Q(t) Im (X + iY)^m`
-//! with `t = ρ² = X² + Y²`, `Q(t) = (−1)^k P_k^{(m,0)}(1 − 2t)`, `k = (n − m)/2`.
-//! Both factors are polynomials in X, Y, so the gradient
-//! `∂/∂X [Q (X+iY)^m] = 2X Q' (X+iY)^m + m Q (X+iY)^{m−1}` (and `i m` for ∂/∂Y)
-//! has no 1/ρ and is regular at the centre.
+//! [`ZernikeBasis`]: the first `n_terms` Noll terms on a disk, evaluated with
+//! Cartesian gradients.
 
-use super::ZernikeError;
+use nalgebra::Complex;
 
-/// Noll index j (≥ 1) → radial order n and signed azimuthal order m
-/// (m > 0: cos mθ, m < 0: sin |m|θ, 0: rotationally symmetric).
+use super::radial::{Layout, NONE};
+use super::{ZernikeError, MAX_TERMS};
+
+/// The Noll terms j = 1 ..= `n_terms` on the disk of `radius_mm` about
+/// `center_mm` (world x, y, mm).
 ///
-/// # Errors
-/// [`ZernikeError::InvalidIndex`] for j = 0.
-pub fn noll_to_nm(j: usize) -> Result<(u32, i32), ZernikeError> {
-    if j == 0 {
-        return Err(ZernikeError::InvalidIndex { j });
-    }
-    // Largest n with n(n+1)/2 < j.
-    let mut n = (((8.0 * (j - 1) as f64 + 1.0).sqrt() - 1.0) / 2.0) as usize;
-    while n * (n + 1) / 2 >= j {
-        n -= 1;
-    }
-    while (n + 1) * (n + 2) / 2 < j {
-        n += 1;
-    }
-    let p = j - n * (n + 1) / 2; // 1-based position within the row
-    let parity = n % 2;
-    let m = 2 * ((p + parity) / 2) - parity;
-    let signed = if m == 0 || j % 2 == 0 {
-        m as i32
-    } else {
-        -(m as i32)
-    };
-    Ok((n as u32, signed))
-}
-
-/// Radial order n and signed m → Noll index j.
-///
-/// # Errors
-/// [`ZernikeError::InvalidOrder`] unless `|m| ≤ n` and `n − |m|` is even.
-pub fn nm_to_noll(n: u32, m: i32) -> Result<usize, ZernikeError> {
-    let am = m.unsigned_abs();
-    if am > n || (n - am) % 2 != 0 {
-        return Err(ZernikeError::InvalidOrder { n, m });
-    }
-    let row = (n as usize) * (n as usize + 1) / 2;
-    if am == 0 {
-        return Ok(row + 1);
-    }
-    let j = row + am as usize;
-    // Of the two candidates j and j + 1, cos takes the even one, sin the odd.
-    let want_even = m > 0;
-    Ok(if (j % 2 == 0) == want_even { j } else { j + 1 })
-}
-
-/// Number of terms with radial order ≤ `n_max`: `(n_max+1)(n_max+2)/2`.
-pub fn terms_up_to_order(n_max: u32) -> usize {
-    let n = n_max as usize;
-    (n + 1) * (n + 2) / 2
-}
-
-/// The terms of a basis laid out by azimuthal order m, then k = (n − m)/2:
-/// `cos[m][k]` and `sin[m][k]` are the coefficient indices (Noll j − 1) of the
-/// cos/sin term, None beyond the basis' size; `norm[index]` its normalisation.
+/// The layout of the recurrence is precomputed once, so evaluating all terms
+/// costs O(`n_terms`) and allocates nothing.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct Layout {
-    pub cos: Vec<Vec<Option<usize>>>,
-    pub sin: Vec<Vec<Option<usize>>>,
-    pub norm: Vec<f64>,
+pub struct ZernikeBasis {
+    n_terms: usize,
+    radius_mm: f64,
+    center_mm: [f64; 2],
+    pub(super) layout: Layout,
 }
 
-impl Layout {
-    pub fn new(n_terms: usize) -> Self {
-        let mut n_max = 0u32;
-        while terms_up_to_order(n_max) < n_terms {
-            n_max += 1;
+impl ZernikeBasis {
+    /// Basis of the Noll terms 1 ..= `n_terms` normalised on the disk of
+    /// radius `radius_mm` (mm) centred at `center_mm` (mm).
+    ///
+    /// # Errors
+    /// [`ZernikeError::InvalidTermCount`] unless `1 <= n_terms <= MAX_TERMS`;
+    /// [`ZernikeError::InvalidRadius`] unless `radius_mm` is finite and > 0;
+    /// [`ZernikeError::InvalidCenter`] unless `center_mm` is finite.
+    pub fn new(n_terms: usize, radius_mm: f64, center_mm: [f64; 2]) -> Result<Self, ZernikeError> {
+        if n_terms == 0 || n_terms > MAX_TERMS {
+            return Err(ZernikeError::InvalidTermCount {
+                n_terms,
+                max: MAX_TERMS,
+            });
         }
-        let mut cos = Vec::new();
-        let mut sin = Vec::new();
-        for m in 0..=n_max {
-            let kmax = ((n_max - m) / 2) as usize;
-            cos.push(vec![None; kmax + 1]);
-            sin.push(vec![None; kmax + 1]);
+        if !(radius_mm.is_finite() && radius_mm > 0.0) {
+            return Err(ZernikeError::InvalidRadius { radius_mm });
         }
-        let mut norm = vec![0.0; n_terms];
-        for (idx, nrm) in norm.iter_mut().enumerate() {
-            let (n, m) = noll_to_nm(idx + 1).expect("j ≥ 1");
-            let am = m.unsigned_abs();
-            let k = ((n - am) / 2) as usize;
-            let table = if m < 0 { &mut sin } else { &mut cos };
-            table[am as usize][k] = Some(idx);
-            *nrm = if m == 0 {
-                f64::from(n + 1).sqrt()
-            } else {
-                (2.0 * f64::from(n + 1)).sqrt()
-            };
+        if !center_mm.iter().all(|c| c.is_finite()) {
+            return Err(ZernikeError::InvalidCenter { center_mm });
         }
-        Layout { cos, sin, norm }
+        Ok(ZernikeBasis {
+            n_terms,
+            radius_mm,
+            center_mm,
+            layout: Layout::new(n_terms),
+        })
     }
 
-    /// Calls `visit(index, value, d/dX, d/dY)` for every term at the
-    /// normalised point (X, Y), derivatives per unit of normalised coordinate.
+    /// Number of terms (Noll j = 1 ..= `n_terms`).
+    pub fn n_terms(&self) -> usize {
+        self.n_terms
+    }
+
+    /// Normalisation radius, mm: `rho = r / radius_mm`.
+    pub fn radius_mm(&self) -> f64 {
+        self.radius_mm
+    }
+
+    /// Disk centre (world x, y), mm.
+    pub fn center_mm(&self) -> [f64; 2] {
+        self.center_mm
+    }
+
+    /// Highest radial order n present in the basis.
+    pub fn max_order(&self) -> u32 {
+        super::indices::order_of(self.n_terms) as u32
+    }
+
+    /// Normalised coordinates `(X, Y) = ((x, y) - center_mm) / radius_mm`
+    /// (dimensionless; `rho^2 = X^2 + Y^2`) of the world point `(x_mm, y_mm)`.
     #[inline]
-    pub fn for_each(&self, x: f64, y: f64, mut visit: impl FnMut(usize, f64, f64, f64)) {
+    pub fn normalized(&self, x_mm: f64, y_mm: f64) -> (f64, f64) {
+        let inv = 1.0 / self.radius_mm;
+        (
+            (x_mm - self.center_mm[0]) * inv,
+            (y_mm - self.center_mm[1]) * inv,
+        )
+    }
+
+    /// All basis values `Z_j(x, y)` (dimensionless) and their derivatives
+    /// `dZ_j/dx`, `dZ_j/dy` (per mm) at the world point `(x_mm, y_mm)`.
+    /// Slot k of each slice receives Noll j = k + 1. Valid everywhere, also
+    /// outside the unit disk.
+    ///
+    /// # Errors
+    /// [`ZernikeError::LengthMismatch`] unless all three slices hold exactly
+    /// `n_terms` values (nothing is written then).
+    pub fn eval_into(
+        &self,
+        x_mm: f64,
+        y_mm: f64,
+        values: &mut [f64],
+        d_dx: &mut [f64],
+        d_dy: &mut [f64],
+    ) -> Result<(), ZernikeError> {
+        self.check_len("values", values.len())?;
+        self.check_len("d_dx", d_dx.len())?;
+        self.check_len("d_dy", d_dy.len())?;
+        self.fill_with_gradients(x_mm, y_mm, values, d_dx, d_dy);
+        Ok(())
+    }
+
+    /// All basis values `Z_j(x, y)` (dimensionless) at the world point
+    /// `(x_mm, y_mm)`; slot k receives Noll j = k + 1.
+    ///
+    /// # Errors
+    /// [`ZernikeError::LengthMismatch`] unless `values` holds exactly
+    /// `n_terms` values.
+    pub fn eval_values_into(
+        &self,
+        x_mm: f64,
+        y_mm: f64,
+        values: &mut [f64],
+    ) -> Result<(), ZernikeError> {
+        self.check_len("values", values.len())?;
+        self.fill_values(x_mm, y_mm, values);
+        Ok(())
+    }
+
+    fn check_len(&self, what: &'static str, actual: usize) -> Result<(), ZernikeError> {
+        if actual == self.n_terms {
+            Ok(())
+        } else {
+            Err(ZernikeError::LengthMismatch {
+                what,
+                expected: self.n_terms,
+                actual,
+            })
+        }
+    }
+
+    /// Values only; slices already checked to hold `n_terms` values.
+    pub(super) fn fill_values(&self, x_mm: f64, y_mm: f64, values: &mut [f64]) {
+        let (x, y) = self.normalized(x_mm, y_mm);
         let t = x * x + y * y;
-        let arg = 1.0 - 2.0 * t;
-        // (X + iY)^m and (X + iY)^(m−1), updated as m grows.
-        let (mut re, mut im) = (1.0, 0.0);
-        let (mut re1, mut im1) = (0.0, 0.0);
-        for m in 0..self.cos.len() {
-            let fm = m as f64;
-            let alpha = fm;
-            let (mut p_prev, mut dp_prev) = (0.0, 0.0);
-            let (mut p, mut dp) = (1.0, 0.0);
-            for k in 0..self.cos[m].len() {
-                if k == 1 {
-                    p_prev = p;
-                    dp_prev = dp;
-                    p = (alpha + 1.0) + (alpha + 2.0) * (arg - 1.0) / 2.0;
-                    dp = (alpha + 2.0) / 2.0;
-                } else if k >= 2 {
-                    let kf = k as f64;
-                    let a = 2.0 * kf * (kf + alpha) * (2.0 * kf + alpha - 2.0);
-                    let b = 2.0 * kf + alpha - 1.0;
-                    let c = (2.0 * kf + alpha) * (2.0 * kf + alpha - 2.0);
-                    let d = 2.0 * (kf + alpha - 1.0) * (kf - 1.0) * (2.0 * kf + alpha);
-                    let p_next = (b * (c * arg + alpha * alpha) * p - d * p_prev) / a;
-                    let dp_next =
-                        (b * (c * arg + alpha * alpha) * dp + b * c * p - d * dp_prev) / a;
-                    p_prev = p;
-                    dp_prev = dp;
-                    p = p_next;
-                    dp = dp_next;
+        let w = Complex::new(x, y);
+        let mut wm = Complex::new(1.0, 0.0); // (X + iY)^m
+        let mut m_cur = 0;
+        for col in &self.layout.columns {
+            while m_cur < col.m {
+                wm *= w;
+                m_cur += 1;
+            }
+            let (mut q1, mut q2) = (1.0, 0.0); // Q_(k-1), Q_(k-2)
+            for e in &self.layout.entries[col.start..col.end] {
+                let s = e.step;
+                let q = (s.a * t + s.b) * q1 - s.c * q2;
+                (q2, q1) = (q1, q);
+                let nq = e.norm * q;
+                if e.idx_re != NONE {
+                    values[e.idx_re] = nq * wm.re;
                 }
-                // Q = (−1)^k P(1 − 2t), dQ/dt = (−1)^k (−2) P'.
-                let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
-                let q = sign * p;
-                let dq = -2.0 * sign * dp;
-                if let Some(idx) = self.cos[m][k] {
-                    let nrm = self.norm[idx];
-                    let v = q * re;
-                    let dx = 2.0 * x * dq * re + fm * q * re1;
-                    let dy = 2.0 * y * dq * re - fm * q * im1;
-                    visit(idx, nrm * v, nrm * dx, nrm * dy);
-                }
-                if let Some(idx) = self.sin[m][k] {
-                    let nrm = self.norm[idx];
-                    let v = q * im;
-                    let dx = 2.0 * x * dq * im + fm * q * im1;
-                    let dy = 2.0 * y * dq * im + fm * q * re1;
-                    visit(idx, nrm * v, nrm * dx, nrm * dy);
+                if e.idx_im != NONE {
+                    values[e.idx_im] = nq * wm.im;
                 }
             }
-            // Advance to m + 1.
-            re1 = re;
-            im1 = im;
-            let (nr, ni) = (re * x - im * y, re * y + im * x);
-            re = nr;
-            im = ni;
+        }
+    }
+
+    /// Values and per-mm gradients; slices already checked.
+    ///
+    /// With `F = Q(X^2 + Y^2) (X + iY)^m`:
+    /// `dF/dX = 2X Q' w^m + m Q w^(m-1)`, `dF/dY = 2Y Q' w^m + i m Q w^(m-1)`;
+    /// cosine terms take the real part, sine terms the imaginary part.
+    pub(super) fn fill_with_gradients(
+        &self,
+        x_mm: f64,
+        y_mm: f64,
+        values: &mut [f64],
+        d_dx: &mut [f64],
+        d_dy: &mut [f64],
+    ) {
+        let (x, y) = self.normalized(x_mm, y_mm);
+        let t = x * x + y * y;
+        let inv_r = 1.0 / self.radius_mm;
+        let w = Complex::new(x, y);
+        let (mut wm, mut wm1) = (Complex::new(1.0, 0.0), Complex::new(0.0, 0.0));
+        let mut m_cur = 0;
+        for col in &self.layout.columns {
+            while m_cur < col.m {
+                wm1 = wm;
+                wm *= w;
+                m_cur += 1;
+            }
+            let mf = f64::from(col.m);
+            let (mut q1, mut q2, mut d1, mut d2) = (1.0, 0.0, 0.0, 0.0);
+            for e in &self.layout.entries[col.start..col.end] {
+                let s = e.step;
+                let lin = s.a * t + s.b;
+                let q = lin * q1 - s.c * q2;
+                let dq = s.a * q1 + lin * d1 - s.c * d2;
+                (q2, q1, d2, d1) = (q1, q, d1, dq);
+                let a = wm * (2.0 * dq); // 2 Q' w^m
+                let b = wm1 * (mf * q); // m Q w^(m-1)
+                let g = e.norm * inv_r;
+                if e.idx_re != NONE {
+                    values[e.idx_re] = e.norm * q * wm.re;
+                    d_dx[e.idx_re] = g * (x * a.re + b.re);
+                    d_dy[e.idx_re] = g * (y * a.re - b.im);
+                }
+                if e.idx_im != NONE {
+                    values[e.idx_im] = e.norm * q * wm.im;
+                    d_dx[e.idx_im] = g * (x * a.im + b.im);
+                    d_dy[e.idx_im] = g * (y * a.im + b.re);
+                }
+            }
         }
     }
 }

@@ -1,132 +1,38 @@
-//! Least-squares Zernike fits of heights and of slopes, by a blocked
-//! Householder QR that never holds the full design matrix: each block of
-//! rows is stacked under the running triangular factor and re-factored.
+//! Weighted least-squares fits of Zernike coefficients to heights or slopes,
+//! by incremental blocked Householder QR (the design matrix is never stored).
 
-use nalgebra::{DMatrix, DVector};
+use super::qr::{Factor, IncrementalQr};
+use super::{ZernikeBasis, ZernikeError, MAX_CONDITION_NUMBER, MM_PER_NM, NM_PER_MM};
 
-use super::{ZernikeBasis, ZernikeError, NM_PER_MM};
-
-/// Rows per QR block: large enough to amortise the re-factoring of R, small
-/// enough (4096 × 231 × 8 B = 7.6 MB) to stay in cache-friendly memory.
-const BLOCK_ROWS: usize = 4096;
-/// Condition numbers above this leave fewer than ~4 significant digits in
-/// the coefficients (f64 has 16): the fit is refused.
-const MAX_CONDITION: f64 = 1e12;
-
-/// The result of a fit.
+/// Result of a Zernike least-squares fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ZernikeFit {
-    /// Coefficients, nm (index k = Noll j − 1).
+    /// Fitted coefficients, nm; index k holds Noll j = k + 1 (same basis as
+    /// the fit). For slope fits index 0 (piston) is always 0.
     pub coefficients_nm: Vec<f64>,
-    /// Ratio of the largest to the smallest singular value of the (weighted) design.
+    /// 2-norm condition number of the weighted design matrix (largest over
+    /// smallest singular value), at most [`MAX_CONDITION_NUMBER`].
     pub condition_number: f64,
-    /// RMS of the weighted residuals, in the data's unit (mm for heights,
-    /// dimensionless for slopes).
+    /// Weighted RMS of the fit residual, `sqrt(sum w r^2 / sum w)`, in the
+    /// units of the data: mm for heights, mm/mm for slopes (both components
+    /// pooled).
     pub residual_rms: f64,
-    /// Data rows used (points for heights, 2 × points for slopes).
-    pub rows: usize,
+    /// Points that entered the fit (those with a positive weight).
+    pub n_points: usize,
 }
 
-/// Running `R` and `Qᵀ b` of a blocked QR.
-struct Accumulator {
-    unknowns: usize,
-    r: DMatrix<f64>,
-    qtb: DVector<f64>,
-    rss: f64,
-    rows: usize,
-    block: DMatrix<f64>,
-    rhs: DVector<f64>,
-    fill: usize,
-}
-
-impl Accumulator {
-    fn new(unknowns: usize) -> Self {
-        Accumulator {
-            unknowns,
-            r: DMatrix::zeros(0, unknowns),
-            qtb: DVector::zeros(0),
-            rss: 0.0,
-            rows: 0,
-            block: DMatrix::zeros(BLOCK_ROWS, unknowns),
-            rhs: DVector::zeros(BLOCK_ROWS),
-            fill: 0,
-        }
-    }
-
-    fn push(&mut self, row: &[f64], value: f64) {
-        for (c, &v) in row.iter().enumerate() {
-            self.block[(self.fill, c)] = v;
-        }
-        self.rhs[self.fill] = value;
-        self.fill += 1;
-        self.rows += 1;
-        if self.fill == BLOCK_ROWS {
-            self.flush();
-        }
-    }
-
-    fn flush(&mut self) {
-        if self.fill == 0 {
-            return;
-        }
-        let (u, k) = (self.unknowns, self.r.nrows());
-        let mut m = DMatrix::zeros(k + self.fill, u);
-        m.rows_mut(0, k).copy_from(&self.r);
-        m.rows_mut(k, self.fill)
-            .copy_from(&self.block.rows(0, self.fill));
-        let mut b = DVector::zeros(k + self.fill);
-        b.rows_mut(0, k).copy_from(&self.qtb);
-        b.rows_mut(k, self.fill)
-            .copy_from(&self.rhs.rows(0, self.fill));
-        let qr = m.qr();
-        qr.q_tr_mul(&mut b);
-        let keep = u.min(k + self.fill);
-        self.rss += b.rows(keep, b.len() - keep).norm_squared();
-        self.r = qr.r().rows(0, keep).into_owned();
-        self.qtb = b.rows(0, keep).into_owned();
-        self.fill = 0;
-    }
-
-    fn solve(mut self) -> Result<(DVector<f64>, f64, f64, usize), ZernikeError> {
-        self.flush();
-        if self.rows < self.unknowns {
-            return Err(ZernikeError::TooFewPoints {
-                rows: self.rows,
-                unknowns: self.unknowns,
-            });
-        }
-        let sv = self.r.clone().singular_values();
-        let (hi, lo) = (sv.max(), sv.min());
-        let condition_number = if lo > 0.0 { hi / lo } else { f64::INFINITY };
-        if condition_number.is_nan() || condition_number > MAX_CONDITION {
-            return Err(ZernikeError::IllConditioned { condition_number });
-        }
-        let x = self
-            .r
-            .solve_upper_triangular(&self.qtb)
-            .ok_or(ZernikeError::IllConditioned { condition_number })?;
-        let rms = (self.rss / self.rows as f64).sqrt();
-        Ok((x, condition_number, rms, self.rows))
-    }
-}
-
-fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), ZernikeError> {
-    if expected == found {
-        Ok(())
-    } else {
-        Err(ZernikeError::LengthMismatch {
-            what,
-            expected,
-            found,
-        })
-    }
-}
-
-/// Fits `heights_mm` at `(xs_mm, ys_mm)` with all terms of `basis`;
-/// `weights` (optional) multiply each squared residual.
+/// Fit `heights_mm` (mm) at world points `(xs_mm, ys_mm)` (mm) with all
+/// `basis.n_terms()` terms, minimising `sum_i w_i (W(x_i, y_i) - h_i)^2`.
+///
+/// `weights` (default all 1) must be finite and >= 0; points of weight 0 are
+/// skipped. Memory is O(n_terms^2) whatever the number of points.
 ///
 /// # Errors
-/// Length mismatches, too few points, or a condition number above 1e12.
+/// [`ZernikeError::LengthMismatch`], [`ZernikeError::NonFinite`],
+/// [`ZernikeError::InvalidWeight`] for bad input;
+/// [`ZernikeError::TooFewPoints`] with fewer usable points than terms;
+/// [`ZernikeError::IllConditioned`] when the condition number exceeds
+/// [`MAX_CONDITION_NUMBER`] (e.g. all points on a line).
 pub fn fit_heights(
     basis: &ZernikeBasis,
     xs_mm: &[f64],
@@ -134,36 +40,47 @@ pub fn fit_heights(
     heights_mm: &[f64],
     weights: Option<&[f64]>,
 ) -> Result<ZernikeFit, ZernikeError> {
-    let n = xs_mm.len();
-    check_len("ys_mm", n, ys_mm.len())?;
-    check_len("heights_mm", n, heights_mm.len())?;
-    if let Some(w) = weights {
-        check_len("weights", n, w.len())?;
+    let data = [
+        ("xs_mm", xs_mm),
+        ("ys_mm", ys_mm),
+        ("heights_mm", heights_mm),
+    ];
+    let (points, w_max) = validate(&data, weights)?;
+    let p = basis.n_terms();
+    check_count(points, points, p)?;
+    let mut qr = IncrementalQr::new(p);
+    let mut row = vec![0.0; p + 1];
+    let mut weight_sum = 0.0;
+    for i in 0..xs_mm.len() {
+        let w = weights.map_or(1.0, |w| w[i] / w_max);
+        if w == 0.0 {
+            continue;
+        }
+        basis.fill_values(xs_mm[i], ys_mm[i], &mut row[..p]);
+        row[p] = heights_mm[i] * NM_PER_MM;
+        qr.push_row(&row, w.sqrt());
+        weight_sum += w;
     }
-    let u = basis.n_terms();
-    let mut acc = Accumulator::new(u);
-    let mut row = vec![0.0; u];
-    for p in 0..n {
-        let sw = weights.map_or(1.0, |w| w[p].max(0.0).sqrt());
-        basis.eval_values_into(xs_mm[p], ys_mm[p], &mut row);
-        row.iter_mut().for_each(|v| *v *= sw);
-        acc.push(&row, sw * heights_mm[p] * NM_PER_MM);
-    }
-    let (x, condition_number, rms, rows) = acc.solve()?;
+    let (coefficients_nm, condition_number, residual) = solve(qr.finish())?;
     Ok(ZernikeFit {
-        coefficients_nm: x.iter().copied().collect(),
+        coefficients_nm,
         condition_number,
-        residual_rms: rms / NM_PER_MM,
-        rows,
+        residual_rms: residual * MM_PER_NM / weight_sum.sqrt(),
+        n_points: points,
     })
 }
 
-/// Fits slopes `(∂W/∂x, ∂W/∂y)` (dimensionless) at `(xs_mm, ys_mm)` with the
-/// gradients of terms j = 2 … n_terms. Piston (j = 1) has no slope and is not
-/// observable: it is not an unknown and is returned as 0.
+/// Fit surface slopes `dzdx`, `dzdy` (dimensionless, mm/mm) at world points
+/// `(xs_mm, ys_mm)` (mm), minimising
+/// `sum_i w_i ((dW/dx - dzdx_i)^2 + (dW/dy - dzdy_i)^2)`.
+///
+/// Piston (Noll j = 1) has zero gradient and is not observable from slopes:
+/// it is excluded from the unknowns and reported as 0. All other terms of
+/// `basis` are fitted. Each point gives two equations.
 ///
 /// # Errors
-/// Length mismatches, too few points, or a condition number above 1e12.
+/// As [`fit_heights`]; [`ZernikeError::TooFewPoints`] when `2 x points` is
+/// below `n_terms - 1`.
 pub fn fit_slopes(
     basis: &ZernikeBasis,
     xs_mm: &[f64],
@@ -172,39 +89,115 @@ pub fn fit_slopes(
     dzdy: &[f64],
     weights: Option<&[f64]>,
 ) -> Result<ZernikeFit, ZernikeError> {
-    let n = xs_mm.len();
-    check_len("ys_mm", n, ys_mm.len())?;
-    check_len("dzdx", n, dzdx.len())?;
-    check_len("dzdy", n, dzdy.len())?;
-    if let Some(w) = weights {
-        check_len("weights", n, w.len())?;
+    let data = [
+        ("xs_mm", xs_mm),
+        ("ys_mm", ys_mm),
+        ("dzdx", dzdx),
+        ("dzdy", dzdy),
+    ];
+    let (points, w_max) = validate(&data, weights)?;
+    let n = basis.n_terms();
+    let p = n - 1;
+    check_count(points, 2 * points, p)?;
+    let mut qr = IncrementalQr::new(p);
+    let (mut v, mut gx, mut gy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let mut row = vec![0.0; p + 1];
+    let mut weight_sum = 0.0;
+    for i in 0..xs_mm.len() {
+        let w = weights.map_or(1.0, |w| w[i] / w_max);
+        if w == 0.0 {
+            continue;
+        }
+        basis.fill_with_gradients(xs_mm[i], ys_mm[i], &mut v, &mut gx, &mut gy);
+        let scale = w.sqrt();
+        for (g, slope) in [(&gx, dzdx[i]), (&gy, dzdy[i])] {
+            row[..p].copy_from_slice(&g[1..]);
+            row[p] = slope * NM_PER_MM; // nm per mm, matching dZ/dx per mm x nm
+            qr.push_row(&row, scale);
+        }
+        weight_sum += 2.0 * w;
     }
-    let u = basis.n_terms();
-    if u < 2 {
-        return Err(ZernikeError::TooFewPoints {
-            rows: 2 * n,
-            unknowns: 0,
-        });
-    }
-    let mut acc = Accumulator::new(u - 1);
-    let (mut v, mut gx, mut gy) = (vec![0.0; u], vec![0.0; u], vec![0.0; u]);
-    for p in 0..n {
-        let sw = weights.map_or(1.0, |w| w[p].max(0.0).sqrt());
-        basis.eval_into(xs_mm[p], ys_mm[p], &mut v, &mut gx, &mut gy);
-        // Basis gradients are per mm of a unit-coefficient term; a coefficient
-        // in nm adds 1e-6 × that to the dimensionless slope.
-        gx[1..].iter_mut().for_each(|g| *g *= sw / NM_PER_MM);
-        gy[1..].iter_mut().for_each(|g| *g *= sw / NM_PER_MM);
-        acc.push(&gx[1..], sw * dzdx[p]);
-        acc.push(&gy[1..], sw * dzdy[p]);
-    }
-    let (x, condition_number, rms, rows) = acc.solve()?;
-    let mut coefficients_nm = vec![0.0];
-    coefficients_nm.extend(x.iter());
+    let (fitted, condition_number, residual) = solve(qr.finish())?;
+    let mut coefficients_nm = Vec::with_capacity(n);
+    coefficients_nm.push(0.0);
+    coefficients_nm.extend_from_slice(&fitted);
     Ok(ZernikeFit {
         coefficients_nm,
         condition_number,
-        residual_rms: rms,
-        rows,
+        residual_rms: residual * MM_PER_NM / weight_sum.sqrt(),
+        n_points: points,
     })
+}
+
+/// Check lengths, finiteness and weights. Returns the number of points with a
+/// positive weight and the largest weight (1 without weights). Weights are
+/// divided by it, so they are at most 1 and neither squares of huge weights
+/// overflow nor 1 / (tiny weight) does; the solution is unchanged.
+fn validate(
+    data: &[(&'static str, &[f64])],
+    weights: Option<&[f64]>,
+) -> Result<(usize, f64), ZernikeError> {
+    let n = data[0].1.len();
+    let all = data.iter().copied().chain(weights.map(|w| ("weights", w)));
+    for (what, values) in all {
+        if values.len() != n {
+            return Err(ZernikeError::LengthMismatch {
+                what,
+                expected: n,
+                actual: values.len(),
+            });
+        }
+    }
+    for (what, values) in data {
+        if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+            return Err(ZernikeError::NonFinite { what, index });
+        }
+    }
+    let Some(w) = weights else {
+        return Ok((n, 1.0));
+    };
+    if let Some(index) = w.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+        return Err(ZernikeError::InvalidWeight {
+            index,
+            weight: w[index],
+        });
+    }
+    let w_max = w.iter().fold(0.0_f64, |a, &b| a.max(b));
+    let used = w.iter().filter(|&&v| v > 0.0).count();
+    Ok((used, if w_max > 0.0 { w_max } else { 1.0 }))
+}
+
+fn check_count(points: usize, equations: usize, unknowns: usize) -> Result<(), ZernikeError> {
+    if equations < unknowns || points == 0 {
+        Err(ZernikeError::TooFewPoints {
+            points,
+            equations,
+            unknowns,
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// Condition check and back substitution: (solution, condition, ||residual||).
+fn solve(factor: Factor) -> Result<(Vec<f64>, f64, f64), ZernikeError> {
+    if let Some(index) = factor.r.iter().position(|v| !v.is_finite()) {
+        return Err(ZernikeError::NonFinite {
+            what: "triangular factor (overflow)",
+            index,
+        });
+    }
+    // Never NaN: condition_number() returns +inf for every degenerate case.
+    let condition_number = factor.condition_number();
+    if condition_number > MAX_CONDITION_NUMBER {
+        return Err(ZernikeError::IllConditioned { condition_number });
+    }
+    let x = factor.solve();
+    if let Some(index) = x.iter().position(|v| !v.is_finite()) {
+        return Err(ZernikeError::NonFinite {
+            what: "fitted coefficients (overflow)",
+            index,
+        });
+    }
+    Ok((x, condition_number, factor.residual_norm()))
 }

@@ -1,0 +1,150 @@
+//! `mfd reconstruct` as an operator runs it, on good and on bad acquisitions:
+//! bad input ends in an error naming the file or frame, or in flagged pixels,
+//! never in a panic or silent NaN.
+
+mod common;
+
+use std::process::Command;
+
+use mfd::acquisition::FrameInfo;
+use mfd::spectral::{flags, SpectralConfig, SpectralSolver};
+use mfd::station::Station;
+
+fn mfd(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_mfd"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn simulate(dir: &std::path::Path) -> std::path::PathBuf {
+    let station = common::public_small().join("station.toml");
+    let acq = dir.join("acq");
+    let out = mfd(&[
+        "simulate",
+        "--station",
+        station.to_str().unwrap(),
+        "--random-surfaces",
+        "4",
+        "--tau-start",
+        "0.5",
+        "--tau-stop",
+        "100",
+        "--tau-step",
+        "0.5",
+        "--noise",
+        "0.02",
+        "--out",
+        acq.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    acq
+}
+
+#[test]
+fn reconstructs_a_simulated_acquisition() {
+    let dir = tempfile::tempdir().unwrap();
+    let acq = simulate(dir.path());
+    let res = dir.path().join("result");
+    let out = mfd(&[
+        "reconstruct",
+        acq.to_str().unwrap(),
+        "--out",
+        res.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in [
+        "screen_coords.npy",
+        "screen_std.npy",
+        "flags.npy",
+        "amplitudes.npy",
+        "reflections.npy",
+    ] {
+        assert!(res.join(f).is_file(), "{f} missing");
+    }
+    let out = mfd(&[
+        "compare",
+        "--screen-coords",
+        res.join("screen_coords.npy").to_str().unwrap(),
+        "--truth",
+        acq.join("truth/truth_screen_coords.npy").to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("S1 (front): found") && text.contains("S2 (back): found"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_truncated_stack_is_named_with_what_survives() {
+    let dir = tempfile::tempdir().unwrap();
+    let acq = simulate(dir.path());
+    let stack = acq.join("frames.npy");
+    let len = std::fs::metadata(&stack).unwrap().len();
+    let f = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&stack)
+        .unwrap();
+    f.set_len(len - 48 * 48 * 2 * 10 - 7).unwrap();
+    let out = mfd(&[
+        "reconstruct",
+        acq.to_str().unwrap(),
+        "--out",
+        dir.path().join("r").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // 400 frames announced, 10 cut and a partial one: 389 complete.
+    assert!(
+        err.contains("frames.npy") && err.contains("389 complete frames of 400"),
+        "{err}"
+    );
+}
+
+#[test]
+fn dark_and_saturated_frames_give_flagged_pixels_not_panics() {
+    let station = Station::load(&common::public_small().join("station.toml")).unwrap();
+    let frames: Vec<FrameInfo> = (0..200)
+        .map(|k| FrameInfo {
+            index: k,
+            direction_deg: if k < 100 { 45.0 } else { -45.0 },
+            tau: 1.0 + (k % 100) as f64,
+            phase_rad: 0.0,
+        })
+        .collect();
+    for level in [0u16, 65535, 1000] {
+        let mut solver = SpectralSolver::new(&station, &frames, SpectralConfig::default()).unwrap();
+        let frame = vec![level; 48 * 48];
+        for k in 0..frames.len() {
+            solver.push_frame(k, &frame).unwrap();
+        }
+        let maps = solver.solve().unwrap();
+        assert_eq!(maps.found_both(), 0);
+        for p in &maps.pixels {
+            assert!(
+                p.s[0][0].is_nan() && p.flags & (flags::NO_DATA | flags::NO_SIGNAL) != 0,
+                "level {level}: {p:?}"
+            );
+        }
+    }
+    // A frame of the wrong size or out of order is an error naming the frame.
+    let mut solver = SpectralSolver::new(&station, &frames, SpectralConfig::default()).unwrap();
+    let err = solver.push_frame(0, &[0; 10]).unwrap_err().to_string();
+    assert!(err.contains("frame 0") && err.contains("48x48"), "{err}");
+    let err = solver
+        .push_frame(3, &vec![0; 48 * 48])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("frame 3"), "{err}");
+    let err = solver.solve().unwrap_err().to_string();
+    assert!(err.contains("0 of 200 frames"), "{err}");
+}
