@@ -16,6 +16,13 @@ use crate::trace::PixelPaths;
 /// median (exponential order statistics: ln 1000 / ln 2); 30 is far above it.
 pub const DETECTION_RATIO: f64 = 30.0;
 
+/// The expected separation must exceed this many standard deviations of the
+/// fitted one for the two points to be reported. Below ~5σ the fit's local
+/// (Cramér–Rao) uncertainty no longer describes its error: with 3σ the
+/// reported σ underestimated the error 2–4× at 0.15–0.3 Fourier bins
+/// (`mfd bench thickness`).
+pub const RESOLVE_SIGMAS: f64 = 5.0;
+
 /// What the pixel fit needs besides the series.
 pub struct PixelContext<'a> {
     /// The schedule.
@@ -240,9 +247,10 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
         }
         two = Some(best);
     }
+    let merged = one.fit.params;
     for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
         out.per_model[k] = cand.map(|c| Scored {
-            result: finalize(ctx, &c, &index, d12, out.base),
+            result: finalize(ctx, &c, &index, d12, &merged, out.base),
             bic: c.bic,
         });
     }
@@ -251,11 +259,14 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
 
 /// The pixel's result under the candidate's model: labels from physics,
 /// checks, uncertainties.
+/// `merged` is the one-reflection fit: its amplitude and falloff describe
+/// the pixel's signal robustly, so they judge whether a pair is separable.
 fn finalize(
     ctx: &PixelContext,
     cand: &Candidate,
     index: &[u32],
     d12: Option<[f64; 2]>,
+    merged: &Params,
     base: PixelResult,
 ) -> PixelResult {
     let mut out = base;
@@ -292,7 +303,8 @@ fn finalize(
         // back reflection of the expected strength at the expected offset
         // would have been resolved is its absence real (AR-coated back).
         out.separation_bins = separation_bins(ctx, &d);
-        if !would_resolve(ctx, index, &p, &d, sigma2) {
+        let sd = expected_separation_std(ctx, index, &p, p.uv[0], p.amp[0], &d, sigma2);
+        if RESOLVE_SIGMAS * sd > d[0].hypot(d[1]) {
             out.flags |= flags::UNRESOLVED;
             return out;
         }
@@ -319,15 +331,19 @@ fn finalize(
     };
     let sep = [p.uv[i1][0] - p.uv[i0][0], p.uv[i1][1] - p.uv[i0][1]];
     out.separation_bins = separation_bins(ctx, &sep);
-    // Resolved: the expected separation exceeds three standard deviations
-    // of the fitted one. Consistent: the fitted offset is within half the
-    // expected one (plus three σ) of it — farther, it could be a swap or a
-    // spurious pair, and neither point is reported.
+    // Resolved: the expected separation exceeds RESOLVE_SIGMAS standard
+    // deviations, both of the fitted separation and of the separation the
+    // data could give for the expected pair (the local bound at a poor fit
+    // can be too optimistic). Consistent: the fitted offset is within half
+    // the expected one (plus three σ) of it — farther, it could be a swap or
+    // a spurious pair, and neither point is reported.
     let sd = cov
         .as_ref()
         .map_or(f64::INFINITY, |c| separation_std(c, &p, i0, i1));
+    let sd_expected =
+        expected_separation_std(ctx, index, merged, merged.uv[0], merged.amp[0], &d, sigma2);
     let expected = d[0].hypot(d[1]);
-    if 3.0 * sd > expected {
+    if RESOLVE_SIGMAS * sd.max(sd_expected) > expected {
         out.flags |= flags::UNRESOLVED;
         return out;
     }
@@ -342,38 +358,37 @@ fn finalize(
     out
 }
 
-/// Whether a pair with the predicted offset `d` and Fresnel amplitude ratio,
-/// centred on the single fitted point, would be separated at noise `sigma2`:
-/// the Cramér–Rao σ of its separation below a third of the separation.
-fn would_resolve(
+/// The Cramér–Rao σ of |S2 − S1| for a pair with the predicted offset `d`
+/// and Fresnel amplitude ratio, centred (amplitude-weighted) on `centre`,
+/// with total amplitude `amp`, at noise `sigma2`: how well this pixel's data
+/// could separate the reflections the geometry expects, whatever the fit found.
+fn expected_separation_std(
     ctx: &PixelContext,
     index: &[u32],
-    one: &Params,
+    fitted: &Params,
+    centre: [f64; 2],
+    amp: f64,
     d: &[f64; 2],
     sigma2: f64,
-) -> bool {
+) -> f64 {
     let w = match (ctx.prior.front, ctx.prior.back) {
         (Ok(f), Ok(b)) => b.weight / (f.weight + b.weight),
         _ => 0.5,
     };
-    let c = one.uv[0];
-    let mut p = start(
-        2,
-        &[
-            [c[0] - w * d[0], c[1] - w * d[1]],
-            [c[0] + (1.0 - w) * d[0], c[1] + (1.0 - w) * d[1]],
-        ],
-        one.kappa,
-    );
-    p.offset = one.offset;
-    p.amp[0] = one.amp[0] * (1.0 - w);
-    p.amp[1] = one.amp[0] * w;
+    let c = centre;
+    let pair = [
+        [c[0] - w * d[0], c[1] - w * d[1]],
+        [c[0] + (1.0 - w) * d[0], c[1] + (1.0 - w) * d[1]],
+    ];
+    let mut p = start(2, &pair, fitted.kappa);
+    p.offset = fitted.offset;
+    p.amp[0] = amp * (1.0 - w);
+    p.amp[1] = amp * w;
     let zeros = vec![0.0; index.len()];
     let ne = super::model::normal_equations(ctx.design, index, &zeros, &p);
-    match ne.jtj.try_inverse() {
-        Some(inv) => separation_std(&(inv * sigma2), &p, 0, 1) * 3.0 < d[0].hypot(d[1]),
-        None => false,
-    }
+    ne.jtj.try_inverse().map_or(f64::INFINITY, |inv| {
+        separation_std(&(inv * sigma2), &p, 0, 1)
+    })
 }
 
 /// Smallest separation over the directions, in Fourier bins, of two screen
