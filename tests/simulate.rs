@@ -11,7 +11,6 @@ use mfd::sim::{simulate, RandomSurfaceSpec, SimCamera, SimParams, Simulation};
 use mfd::station::Station;
 use mfd::surfaces_file::{self, SurfacesFile};
 use mfd::trace::{Plate, TracedView};
-use mfd::zernike::{ZernikeBasis, ZernikeSurface};
 use nalgebra::{DMatrix, DVector};
 
 fn fixture_station() -> Station {
@@ -19,11 +18,9 @@ fn fixture_station() -> Station {
 }
 
 fn random_plate(station: &Station, seed: u64) -> (Plate, SurfacesFile) {
-    let spec = RandomSurfaceSpec::default();
-    let basis =
-        ZernikeBasis::new(spec.n_terms, station.element.aperture_radius_mm, [0.0, 0.0]).unwrap();
-    let front = ZernikeSurface::new(basis.clone(), spec.draw(seed)).unwrap();
-    let back = ZernikeSurface::new(basis, spec.draw(seed + 1)).unwrap();
+    let (front, back) = RandomSurfaceSpec::default()
+        .draw_pair(station.element.aperture_radius_mm, [0.0, 0.0], seed)
+        .unwrap();
     let file = SurfacesFile::from_surfaces(&front, &back);
     (Plate::new(station, front, back, 3.0), file)
 }

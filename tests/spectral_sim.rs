@@ -4,13 +4,13 @@
 
 mod common;
 
+use mfd::acquisition::FrameInfo;
 use mfd::patterns::Schedule;
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
 use mfd::spectral::model::{normal_equations, Params};
 use mfd::spectral::{flags, SpectralConfig, SpectralMaps, SpectralSolver};
 use mfd::station::Station;
 use mfd::trace::{Plate, TracedView};
-use mfd::zernike::{ZernikeBasis, ZernikeSurface};
 
 struct Run {
     view: TracedView,
@@ -26,23 +26,13 @@ fn station(thickness_mm: f64) -> Station {
 }
 
 fn run(station: &Station, params: SimParams, schedule: &Schedule) -> Run {
-    let spec = RandomSurfaceSpec::default();
-    let basis = ZernikeBasis::new(spec.n_terms, 25.5, [0.0, 0.0]).unwrap();
-    let front = ZernikeSurface::new(basis.clone(), spec.draw(21)).unwrap();
-    let back = ZernikeSurface::new(basis, spec.draw(22)).unwrap();
+    let (front, back) = RandomSurfaceSpec::default()
+        .draw_pair(25.5, [0.0, 0.0], 21)
+        .unwrap();
     let view = TracedView::trace(station, &Plate::new(station, front, back, 3.0));
     let mut cam = SimCamera::new(&view, &station.screen, params.clone()).unwrap();
     let patterns = schedule.patterns();
-    let frames: Vec<_> = patterns
-        .iter()
-        .enumerate()
-        .map(|(index, p)| mfd::acquisition::FrameInfo {
-            index,
-            direction_deg: p.direction_deg,
-            tau: p.tau,
-            phase_rad: p.phase_rad,
-        })
-        .collect();
+    let frames: Vec<_> = FrameInfo::from_patterns(&patterns);
     let mut solver = SpectralSolver::new(station, &frames, SpectralConfig::default()).unwrap();
     let mut buf = vec![0u16; station.camera.pixel_count()];
     for (k, p) in patterns.iter().enumerate() {

@@ -91,6 +91,22 @@ pub struct FrameInfo {
     pub phase_rad: f64,
 }
 
+impl FrameInfo {
+    /// The frames of `patterns` shown in that order.
+    pub fn from_patterns(patterns: &[crate::patterns::Pattern]) -> Vec<FrameInfo> {
+        patterns
+            .iter()
+            .enumerate()
+            .map(|(index, p)| FrameInfo {
+                index,
+                direction_deg: p.direction_deg,
+                tau: p.tau,
+                phase_rad: p.phase_rad,
+            })
+            .collect()
+    }
+}
+
 #[derive(Debug)]
 enum Source {
     Stack(Mutex<NpyStackReader>),

@@ -9,7 +9,7 @@ use mfd::patterns::Schedule;
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
 use mfd::station::Station;
 use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
-use mfd::zernike::{ZernikeBasis, ZernikeSurface};
+use mfd::zernike::ZernikeSurface;
 
 /// Arguments of `mfd bench`.
 #[derive(Args)]
@@ -84,16 +84,7 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
     let view = TracedView::trace(&station, &plate);
     let patterns = Schedule::default().patterns();
-    let frames: Vec<FrameInfo> = patterns
-        .iter()
-        .enumerate()
-        .map(|(index, p)| FrameInfo {
-            index,
-            direction_deg: p.direction_deg,
-            tau: p.tau,
-            phase_rad: p.phase_rad,
-        })
-        .collect();
+    let frames: Vec<FrameInfo> = FrameInfo::from_patterns(&patterns);
     let (w, h) = (station.camera.width, station.camera.height);
     let roi = (args.pixels > 0).then(|| {
         let side = (args.pixels as f64).sqrt().ceil() as u32;
@@ -153,12 +144,8 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
 
 fn random_surfaces(station: &Station) -> anyhow::Result<(ZernikeSurface, ZernikeSurface)> {
     let e = &station.element;
-    let spec = RandomSurfaceSpec::default();
-    let basis = ZernikeBasis::new(spec.n_terms, e.aperture_radius_mm, [0.0, 0.0])?;
-    Ok((
-        ZernikeSurface::new(basis.clone(), spec.draw(1))?,
-        ZernikeSurface::new(basis, spec.draw(2))?,
-    ))
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    Ok(RandomSurfaceSpec::default().draw_pair(e.aperture_radius_mm, centre, 1)?)
 }
 
 fn render(args: &RenderArgs) -> anyhow::Result<()> {

@@ -11,7 +11,6 @@ use mfd::spectral::bound::two_reflection_bound;
 use mfd::spectral::{flags, SpectralConfig, SpectralSolver};
 use mfd::station::{CameraProfile, DisplayProfile, Element, Station, SymmetricLayout};
 use mfd::trace::{Plate, TracedView};
-use mfd::zernike::{ZernikeBasis, ZernikeSurface};
 
 /// Arguments of `mfd bench thickness`.
 #[derive(Args)]
@@ -78,10 +77,7 @@ pub fn run(args: &TableArgs) -> anyhow::Result<()> {
 
 fn row(t: f64, n: f64, noise: f64) -> anyhow::Result<()> {
     let station = small_station(t, n)?;
-    let spec = RandomSurfaceSpec::default();
-    let basis = ZernikeBasis::new(spec.n_terms, 25.5, [0.0, 0.0])?;
-    let front = ZernikeSurface::new(basis.clone(), spec.draw(31))?;
-    let back = ZernikeSurface::new(basis, spec.draw(32))?;
+    let (front, back) = RandomSurfaceSpec::default().draw_pair(25.5, [0.0, 0.0], 31)?;
     let view = TracedView::trace(&station, &Plate::new(&station, front, back, 3.0));
     let params = SimParams {
         noise_frac: noise,
@@ -90,16 +86,7 @@ fn row(t: f64, n: f64, noise: f64) -> anyhow::Result<()> {
     };
     let mut cam = SimCamera::new(&view, &station.screen, params.clone())?;
     let patterns = Schedule::default().patterns();
-    let frames: Vec<FrameInfo> = patterns
-        .iter()
-        .enumerate()
-        .map(|(index, p)| FrameInfo {
-            index,
-            direction_deg: p.direction_deg,
-            tau: p.tau,
-            phase_rad: p.phase_rad,
-        })
-        .collect();
+    let frames: Vec<FrameInfo> = FrameInfo::from_patterns(&patterns);
     let mut solver = SpectralSolver::new(&station, &frames, SpectralConfig::default())?;
     let mut buf = vec![0u16; station.camera.pixel_count()];
     for (k, p) in patterns.iter().enumerate() {

@@ -11,7 +11,7 @@ use mfd::sim::{simulate, RandomSurfaceSpec, SimParams, Simulation};
 use mfd::station::Station;
 use mfd::surfaces_file::SurfacesFile;
 use mfd::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
-use mfd::zernike::{ZernikeBasis, ZernikeSurface};
+use mfd::zernike::ZernikeSurface;
 
 /// The pattern schedule flags, shared by every command that shows patterns.
 #[derive(Args, Clone)]
@@ -172,14 +172,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
 }
 
 fn random_pair(station: &Station, seed: u64) -> anyhow::Result<(ZernikeSurface, ZernikeSurface)> {
-    let spec = RandomSurfaceSpec::default();
     let e = &station.element;
-    let basis = ZernikeBasis::new(
-        spec.n_terms,
-        e.aperture_radius_mm,
-        [e.aperture_center_mm.x, e.aperture_center_mm.y],
-    )?;
-    let front = ZernikeSurface::new(basis.clone(), spec.draw(seed))?;
-    let back = ZernikeSurface::new(basis, spec.draw(seed.wrapping_add(1)))?;
-    Ok((front, back))
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    Ok(RandomSurfaceSpec::default().draw_pair(e.aperture_radius_mm, centre, seed)?)
 }

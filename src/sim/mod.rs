@@ -113,16 +113,7 @@ pub fn simulate(sim: &Simulation, out: &Path) -> Result<SimulationReport, SimErr
     let view = TracedView::trace(station, plate);
     let trace_s = t0.elapsed().as_secs_f64();
     let mut camera = SimCamera::new(&view, &station.screen, params)?;
-    let frames: Vec<FrameInfo> = patterns
-        .iter()
-        .enumerate()
-        .map(|(index, p)| FrameInfo {
-            index,
-            direction_deg: p.direction_deg,
-            tau: p.tau,
-            phase_rad: p.phase_rad,
-        })
-        .collect();
+    let frames: Vec<FrameInfo> = FrameInfo::from_patterns(patterns);
     let (w, h) = camera.resolution();
     let mut writer = AcquisitionWriter::create(
         out,

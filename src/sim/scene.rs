@@ -4,6 +4,8 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+use crate::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
+
 /// How to draw a random surface: tilt terms and a band of higher Noll terms
 /// scaled to a given RMS.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,6 +34,24 @@ impl Default for RandomSurfaceSpec {
 }
 
 impl RandomSurfaceSpec {
+    /// A front (seed) and a back (seed + 1) surface on the disk of
+    /// `radius_mm` about `center_mm`.
+    ///
+    /// # Errors
+    /// [`ZernikeError`] for an invalid radius.
+    pub fn draw_pair(
+        &self,
+        radius_mm: f64,
+        center_mm: [f64; 2],
+        seed: u64,
+    ) -> Result<(ZernikeSurface, ZernikeSurface), ZernikeError> {
+        let basis = ZernikeBasis::new(self.n_terms, radius_mm, center_mm)?;
+        Ok((
+            ZernikeSurface::new(basis.clone(), self.draw(seed))?,
+            ZernikeSurface::new(basis, self.draw(seed.wrapping_add(1)))?,
+        ))
+    }
+
     /// Draws coefficients (nm, Noll j = k + 1 at index k, piston 0).
     pub fn draw(&self, seed: u64) -> Vec<f64> {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
