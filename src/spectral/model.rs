@@ -143,12 +143,6 @@ fn eval_row(design: &Design, f: &FrameMeta, p: &Params, row: &mut [f64]) -> f64 
     p.offset + e * sum_bc
 }
 
-/// Model prediction of sample `i` of the design.
-pub fn predict(design: &Design, i: usize, p: &Params) -> f64 {
-    let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
-    eval_row(design, &design.frames[i], p, &mut row)
-}
-
 /// One pass over the used samples: RSS, JᵀJ and Jᵀr at `p`.
 pub fn normal_equations(design: &Design, index: &[u32], y: &[f64], p: &Params) -> Normal {
     // Fixed sizes let the compiler unroll the JᵀJ update (the hot loop).
@@ -182,19 +176,6 @@ fn normal_fixed<const N: usize>(design: &Design, index: &[u32], y: &[f64], p: &P
         jtj: DMatrix::from_fn(N, N, |a, b| jtj[a][b]),
         jtr: DVector::from_column_slice(&jtr),
     }
-}
-
-/// Residual sum of squares only.
-pub fn rss(design: &Design, index: &[u32], y: &[f64], p: &Params) -> f64 {
-    let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
-    index
-        .iter()
-        .zip(y)
-        .map(|(&i, &yi)| {
-            let r = yi - eval_row(design, &design.frames[i as usize], p, &mut row);
-            r * r
-        })
-        .sum()
 }
 
 /// Outcome of a Levenberg–Marquardt fit.
