@@ -3,14 +3,7 @@
 
 mod common;
 
-use std::process::Command;
-
-fn mfd(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_mfd"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use common::mfd;
 
 #[test]
 fn simulate_then_trace_on_the_fixture_station() {

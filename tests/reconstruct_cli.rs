@@ -4,18 +4,11 @@
 
 mod common;
 
-use std::process::Command;
+use common::mfd;
 
 use mfd::acquisition::FrameInfo;
 use mfd::spectral::{flags, SpectralConfig, SpectralSolver};
 use mfd::station::Station;
-
-fn mfd(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_mfd"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn simulate(dir: &std::path::Path) -> std::path::PathBuf {
     let station = common::public_small().join("station.toml");

@@ -25,3 +25,11 @@ pub fn public_small() -> PathBuf {
 pub fn repo(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)
 }
+
+/// Runs the `mfd` binary with `args` and returns what it did.
+pub fn mfd(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_mfd"))
+        .args(args)
+        .output()
+        .unwrap()
+}
