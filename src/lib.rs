@@ -9,6 +9,7 @@
 
 pub mod acquisition;
 pub mod conventions;
+pub mod display;
 pub mod image_io;
 pub mod npy;
 pub mod optics;
