@@ -17,6 +17,7 @@ pub mod patterns;
 pub mod sim;
 pub mod spectral;
 pub mod station;
+pub mod surfaces;
 pub mod surfaces_file;
 pub mod trace;
 pub mod zernike;
