@@ -72,10 +72,7 @@ impl<const N: usize> Sub for Dual<N> {
 impl<const N: usize> Mul for Dual<N> {
     type Output = Self;
     fn mul(self, o: Self) -> Self {
-        let mut g = [0.0; N];
-        for k in 0..N {
-            g[k] = self.g[k] * o.v + self.v * o.g[k];
-        }
+        let g = std::array::from_fn(|k| self.g[k] * o.v + self.v * o.g[k]);
         Dual { v: self.v * o.v, g }
     }
 }
@@ -85,10 +82,7 @@ impl<const N: usize> Div for Dual<N> {
     fn div(self, o: Self) -> Self {
         let inv = 1.0 / o.v;
         let q = self.v * inv;
-        let mut g = [0.0; N];
-        for k in 0..N {
-            g[k] = (self.g[k] - q * o.g[k]) * inv;
-        }
+        let g = std::array::from_fn(|k| (self.g[k] - q * o.g[k]) * inv);
         Dual { v: q, g }
     }
 }
