@@ -3,8 +3,9 @@
 //!
 //! Data flows one way: [`station`] and [`patterns`] describe the instrument,
 //! [`trace`] is the exact forward model, [`sim`] renders what the camera sees,
-//! [`acquisition`] reads and writes recorded frames, and [`surfaces_file`] /
-//! [`npy`] hold the results. [`conventions`] states frames, units and orderings.
+//! [`acquisition`] reads and writes recorded frames, [`surfaces_file`] /
+//! [`npy`] hold the results, and [`plot`] draws report pictures of them.
+//! [`conventions`] states frames, units and orderings.
 #![warn(missing_docs)]
 
 pub mod acquisition;
@@ -14,6 +15,7 @@ pub mod image_io;
 pub mod npy;
 pub mod optics;
 pub mod patterns;
+pub mod plot;
 pub mod sim;
 pub mod spectral;
 pub mod station;
