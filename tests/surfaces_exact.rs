@@ -36,7 +36,8 @@ fn run(station: &Station, terms: Option<usize>, seed: u64) -> (f64, f64) {
     let plate = Plate::new(station, front.clone(), back.clone(), DEFAULT_EDGE_MARGIN_MM);
     let view = TracedView::trace(station, &plate);
     let coords = view.screen_coords();
-    let obs = Observations::from_maps(station, &coords, None).unwrap();
+    let obs =
+        Observations::from_maps(station, &coords, mfd::surfaces::Uncertainty::Unknown).unwrap();
     let opts = SurfaceOptions {
         terms,
         ..SurfaceOptions::default()

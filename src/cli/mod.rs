@@ -3,9 +3,11 @@
 pub mod bench;
 pub mod bench_table;
 pub mod compare;
+pub mod pictures;
 pub mod reconstruct;
 pub mod simulate;
 pub mod station;
+pub mod surfaces_stage;
 pub mod trace;
 
 use std::path::Path;

@@ -11,16 +11,30 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfd::acquisition::Acquisition;
 use mfd::spectral::{flags, SpectralConfig, SpectralMaps, SpectralSolver};
 use mfd::station::Station;
+use mfd::surfaces::Uncertainty;
 use mfd::trace::DEFAULT_EDGE_MARGIN_MM;
 
 /// Arguments of `mfd reconstruct`.
 #[derive(Args)]
 pub struct ReconstructArgs {
-    /// Acquisition folder (mfd-acquisition/1).
-    acquisition: PathBuf,
+    /// Acquisition folder (mfd-acquisition/1); or give --screen-coords.
+    #[arg(required_unless_present = "screen_coords")]
+    acquisition: Option<PathBuf>,
+    /// Rerun only the surface stage from these screen points
+    /// ([rows, columns, 2, 2] float64, spec layout; e.g. from `mfd trace` or
+    /// an earlier reconstruction); needs --station.
+    #[arg(long, conflicts_with = "acquisition", requires = "station")]
+    screen_coords: Option<PathBuf>,
+    /// Their standard deviations, same layout; default: screen_cov.npy
+    /// ([rows, columns, 4, 4], covariance of u1, v1, u2, v2) or else
+    /// screen_std.npy beside --screen-coords when one exists; without
+    /// either the scale is estimated from the residuals.
+    #[arg(long, requires = "screen_coords")]
+    screen_std: Option<PathBuf>,
     /// Output folder: screen_coords.npy [rows, cols, 2, 2] (u, v of front and
     /// back, screen px, NaN where not found), screen_std.npy (their standard
-    /// deviations, px), amplitudes.npy [rows, cols, 4] (A, B1, B2, B3 in
+    /// deviations, px), screen_cov.npy [rows, cols, 4, 4] (covariance of u1,
+    /// v1, u2, v2, px²), amplitudes.npy [rows, cols, 4] (A, B1, B2, B3 in
     /// counts), tau_max.npy, residual_rms.npy (counts), separation_bins.npy
     /// (front–back separation in Fourier bins), reflections.npy (u8: model
     /// chosen, 0–3), flags.npy (u16 bits: 1 no data, 2 no fringe signal,
@@ -52,6 +66,8 @@ pub struct ReconstructArgs {
     /// Only this region of camera pixels: x0,y0,x1,y1 (columns x0..x1, rows y0..y1).
     #[arg(long, value_delimiter = ',')]
     roi: Option<Vec<u32>>,
+    #[command(flatten)]
+    surfaces: super::surfaces_stage::SurfaceArgs,
 }
 
 /// Runs `mfd reconstruct`.
@@ -59,7 +75,13 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     if args.roi.as_ref().is_some_and(|r| r.len() != 4) {
         anyhow::bail!("--roi takes four numbers x0,y0,x1,y1");
     }
-    let mut acq = Acquisition::open(&args.acquisition)?;
+    let surface_opts = args.surfaces.options(args.edge_margin_mm)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let Some(acq_dir) = &args.acquisition else {
+        return from_screen_coords(args, &surface_opts);
+    };
+    let mut acq = Acquisition::open(acq_dir)?;
     let station_path = args
         .station
         .clone()
@@ -93,11 +115,78 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     let t1 = Instant::now();
     let maps = solver.solve()?;
     let solve_s = t1.elapsed().as_secs_f64();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
     maps.write(&args.out)?;
     summarise(&maps, solver.candidate_pixels(), read_s, solve_s);
     println!("wrote {}", args.out.join("screen_coords.npy").display());
+    if !args.surfaces.no_surfaces {
+        let cov = maps.screen_cov();
+        let unc = mfd::surfaces::Uncertainty::Cov(&cov);
+        super::surfaces_stage::run(
+            &station,
+            &maps.screen_coords(),
+            unc,
+            &surface_opts,
+            &args.out,
+        )?;
+        println!("wrote {}", args.out.join("surfaces.json").display());
+    }
+    Ok(())
+}
+
+/// The surface stage alone, from a screen_coords.npy.
+fn from_screen_coords(
+    args: &ReconstructArgs,
+    opts: &mfd::surfaces::SurfaceOptions,
+) -> anyhow::Result<()> {
+    let (Some(coords_path), Some(station_path)) = (&args.screen_coords, &args.station) else {
+        anyhow::bail!("give an acquisition folder, or --screen-coords with --station");
+    };
+    let station = Station::load(station_path)?;
+    let cam = &station.camera;
+    let load = |path: &std::path::Path, k: usize| -> anyhow::Result<Vec<f64>> {
+        let expect = if k == 2 {
+            vec![cam.height as usize, cam.width as usize, 2, 2]
+        } else {
+            vec![cam.height as usize, cam.width as usize, 4, 4]
+        };
+        let (shape, data) = mfd::npy::read_f64(path)?;
+        anyhow::ensure!(
+            shape == expect,
+            "{}: shape {shape:?}, expected {expect:?} (rows, columns, reflection, u/v) for {}",
+            path.display(),
+            station_path.display()
+        );
+        Ok(data)
+    };
+    let coords = load(coords_path, 2)?;
+    let beside = |name: &str| {
+        let p = coords_path.with_file_name(name);
+        p.exists().then_some(p)
+    };
+    let (unc_path, is_cov) = match &args.screen_std {
+        Some(p) => (Some(p.clone()), false),
+        None => match beside("screen_cov.npy") {
+            Some(p) => (Some(p), true),
+            None => (beside("screen_std.npy"), false),
+        },
+    };
+    let unc_data = match &unc_path {
+        Some(p) => {
+            println!("uncertainty of the screen points from {}", p.display());
+            Some(load(p, if is_cov { 4 } else { 2 })?)
+        }
+        None => {
+            println!("no screen_std.npy: the residuals set the uncertainty scale");
+            None
+        }
+    };
+    let unc = match (&unc_data, is_cov) {
+        (None, _) => Uncertainty::Unknown,
+        (Some(d), true) => Uncertainty::Cov(d),
+        (Some(d), false) => Uncertainty::Std(d),
+    };
+    super::surfaces_stage::run(&station, &coords, unc, opts, &args.out)?;
+    println!("wrote {}", args.out.join("surfaces.json").display());
     Ok(())
 }
 

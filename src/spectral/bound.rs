@@ -15,6 +15,23 @@ pub fn two_reflection_bound(
     kappa: f64,
     sigma: f64,
 ) -> Option<[f64; 2]> {
+    let c = two_reflection_cov(design, uv, offset, amp, kappa, sigma)?;
+    Some([
+        (c[0][0] + c[1][1]).max(0.0).sqrt(),
+        (c[2][2] + c[3][3]).max(0.0).sqrt(),
+    ])
+}
+
+/// The bound's full covariance of `(u1, v1, u2, v2)`, px²: the two screen
+/// points of one pixel are correlated where their spectra overlap.
+pub fn two_reflection_cov(
+    design: &Design,
+    uv: [[f64; 2]; 2],
+    offset: f64,
+    amp: [f64; 2],
+    kappa: f64,
+    sigma: f64,
+) -> Option<[[f64; 4]; 4]> {
     let mut p = Params {
         k: 2,
         offset,
@@ -30,9 +47,13 @@ pub fn two_reflection_bound(
         .jtj
         .try_inverse()?
         * (sigma * sigma);
-    let sd = |j: usize| {
-        let u = p.u_index(j);
-        (cov[(u, u)] + cov[(u + 1, u + 1)]).max(0.0).sqrt()
-    };
-    Some([sd(0), sd(1)])
+    let idx = [
+        p.u_index(0),
+        p.u_index(0) + 1,
+        p.u_index(1),
+        p.u_index(1) + 1,
+    ];
+    Some(std::array::from_fn(|a| {
+        std::array::from_fn(|b| cov[(idx[a], idx[b])])
+    }))
 }

@@ -54,6 +54,9 @@ pub struct PixelResult {
     pub s: [[f64; 2]; 2],
     /// Standard deviations of those coordinates, screen px.
     pub std: [[f64; 2]; 2],
+    /// Covariance of `(u1, v1, u2, v2)`, px² (NaN where a point is absent);
+    /// the two points of one pixel are correlated where their spectra overlap.
+    pub cov: [[f64; 4]; 4],
     /// Background A and amplitudes B1, B2, B3, counts (NaN when absent).
     pub amp: [f64; 4],
     /// Fitted τ_max.
@@ -76,6 +79,7 @@ impl PixelResult {
         PixelResult {
             s: [[f64::NAN; 2]; 2],
             std: [[f64::NAN; 2]; 2],
+            cov: [[f64::NAN; 4]; 4],
             amp: [f64::NAN; 4],
             tau_max: f64::NAN,
             residual_rms: f64::NAN,
@@ -92,6 +96,24 @@ impl PixelResult {
         if let Some(c) = cov {
             let u = p.u_index(which);
             self.std[slot] = [c[(u, u)].max(0.0).sqrt(), c[(u + 1, u + 1)].max(0.0).sqrt()];
+            for a in 0..2 {
+                for b in 0..2 {
+                    self.cov[2 * slot + a][2 * slot + b] = c[(u + a, u + b)];
+                }
+            }
+        }
+    }
+
+    /// Cross-covariance of the front (reflection `i0` of `p`) and back
+    /// (`i1`) points, after both were [`PixelResult::set`].
+    fn set_cross(&mut self, p: &Params, i0: usize, i1: usize, cov: Option<&DMatrix<f64>>) {
+        let Some(c) = cov else { return };
+        let (u0, u1) = (p.u_index(i0), p.u_index(i1));
+        for a in 0..2 {
+            for b in 0..2 {
+                self.cov[a][2 + b] = c[(u0 + a, u1 + b)];
+                self.cov[2 + b][a] = c[(u0 + a, u1 + b)];
+            }
         }
     }
 }

@@ -353,6 +353,7 @@ fn finalize(
     }
     out.set(0, &p, i0, cov.as_ref());
     out.set(1, &p, i1, cov.as_ref());
+    out.set_cross(&p, i0, i1, cov.as_ref());
     out.amp[1] = p.amp[i0];
     out.amp[2] = p.amp[i1];
     out

@@ -429,6 +429,22 @@ impl SpectralMaps {
             .collect()
     }
 
+    /// `[rows, columns, 2, 2]` standard deviations of the screen coordinates, px.
+    pub fn screen_std(&self) -> Vec<f64> {
+        self.pixels
+            .iter()
+            .flat_map(|p| [p.std[0][0], p.std[0][1], p.std[1][0], p.std[1][1]])
+            .collect()
+    }
+
+    /// `[rows, columns, 4, 4]` covariance of `(u1, v1, u2, v2)`, px².
+    pub fn screen_cov(&self) -> Vec<f64> {
+        self.pixels
+            .iter()
+            .flat_map(|p| p.cov.into_iter().flatten())
+            .collect()
+    }
+
     /// Writes `screen_coords.npy` and the quality maps into `dir`.
     ///
     /// # Errors
@@ -441,11 +457,16 @@ impl SpectralMaps {
             &[h, w, 2, 2],
             &self.screen_coords(),
         )?;
-        let std: Vec<f64> = px
-            .iter()
-            .flat_map(|p| [p.std[0][0], p.std[0][1], p.std[1][0], p.std[1][1]])
-            .collect();
-        npy::write_f64(&dir.join("screen_std.npy"), &[h, w, 2, 2], &std)?;
+        npy::write_f64(
+            &dir.join("screen_std.npy"),
+            &[h, w, 2, 2],
+            &self.screen_std(),
+        )?;
+        npy::write_f64(
+            &dir.join("screen_cov.npy"),
+            &[h, w, 4, 4],
+            &self.screen_cov(),
+        )?;
         let amp: Vec<f64> = px.iter().flat_map(|p| p.amp).collect();
         npy::write_f64(&dir.join("amplitudes.npy"), &[h, w, 4], &amp)?;
         let scalar = |f: fn(&PixelResult) -> f64| px.iter().map(f).collect::<Vec<f64>>();

@@ -69,7 +69,7 @@ pub fn front_from_slopes(
             sy.push(-n.y / n.z);
             // A screen error δ (mm) turns the reflected ray by δ/dist and the
             // normal by half that.
-            let sigma = 0.5 * (ob.sigma[0][0] + ob.sigma[0][1]) * pitch / (2.0 * dist);
+            let sigma = 0.5 * (ob.sigma(0, 0) + ob.sigma(0, 1)) * pitch / (2.0 * dist);
             w.push(1.0 / (sigma * sigma));
         }
         if xs.is_empty() {

@@ -12,12 +12,14 @@
 pub mod dual;
 pub mod front;
 pub mod lm;
+pub mod observe;
 pub mod path;
 pub mod problem;
+pub mod report;
 pub mod select;
 pub mod solve;
 
-pub use problem::{Layout, Observation, Observations};
+pub use problem::{Layout, Observation, Observations, Uncertainty};
 pub use solve::{reconstruct, SurfaceOptions, SurfaceSolution};
 
 use crate::zernike::ZernikeError;

@@ -2,11 +2,12 @@
 //! points of every pixel, which Zernike terms are free, and the weighted
 //! Gauss–Newton system `JᵀJ δ = −Jᵀr` built from one dual trace per path.
 
-use nalgebra::{DMatrix, DVector, Point3, Vector3};
+use nalgebra::{DMatrix, DVector};
+
+pub use super::observe::{Observation, Observations, Uncertainty};
 use rayon::prelude::*;
 
 use super::path::{back_path, front_path, DualPath, SLOT_BACK, SLOT_FRONT_IN, SLOT_FRONT_OUT};
-use super::SurfaceError;
 use crate::station::Station;
 use crate::trace::Plate;
 use crate::zernike::ZernikeBasis;
@@ -14,104 +15,30 @@ use crate::zernike::ZernikeBasis;
 /// Millimetres per nanometre: coefficients are nm, the tracer works in mm.
 const MM_PER_NM: f64 = 1e-6;
 
-/// One camera pixel's measurement.
-#[derive(Debug, Clone, Copy)]
-pub struct Observation {
-    /// Camera pixel `(column, row)`.
-    pub pixel: [u32; 2],
-    /// The camera ray's unit direction, world frame.
-    pub dir: Vector3<f64>,
-    /// Measured `(u, v)` of the front (0) and back (1) reflection, screen px;
-    /// NaN where that reflection was not found.
-    pub s: [[f64; 2]; 2],
-    /// Standard deviations of those coordinates, screen px.
-    pub sigma: [[f64; 2]; 2],
-}
-
-impl Observation {
-    /// Whether reflection `k` (0 front, 1 back) was measured.
-    pub fn has(&self, k: usize) -> bool {
-        self.s[k][0].is_finite() && self.s[k][1].is_finite()
-    }
-}
-
-/// All pixels' measurements, from `screen_coords.npy` and `screen_std.npy`.
-#[derive(Debug, Clone)]
-pub struct Observations {
-    /// Camera position, world frame, mm.
-    pub camera: Point3<f64>,
-    /// Pixels carrying at least one reflection.
-    pub pixels: Vec<Observation>,
-    /// Whether the σ came from the data (else 1 px everywhere, and the
-    /// residuals set the scale of the covariance).
-    pub sigma_known: bool,
-}
-
-impl Observations {
-    /// Builds the observations from arrays in the spec's layout
-    /// `[rows, columns, 2, 2]` (`std` the same shape, optional).
-    ///
-    /// # Errors
-    /// [`SurfaceError::Input`] when a length disagrees with the camera.
-    pub fn from_maps(
-        station: &Station,
-        coords: &[f64],
-        std: Option<&[f64]>,
-    ) -> Result<Self, SurfaceError> {
-        let cam = &station.camera;
-        let n = cam.pixel_count() * 4;
-        for (what, len) in [
-            ("screen_coords", Some(coords.len())),
-            ("screen_std", std.map(<[f64]>::len)),
-        ] {
-            if let Some(len) = len.filter(|&l| l != n) {
-                return Err(SurfaceError::Input {
-                    what,
-                    problem: format!(
-                        "{len} values, expected {n} = {}×{}×2×2 for the station's camera",
-                        cam.height, cam.width
-                    ),
-                });
+/// Lower Cholesky factor of the `m × m` block of `c` at entries `idx`,
+/// or `None` when it is not positive definite. (Triangular factor and
+/// solves read clearer with indices.)
+#[allow(clippy::needless_range_loop)]
+fn cholesky4(c: &[[f64; 4]; 4], idx: &[usize]) -> Option<[[f64; 4]; 4]> {
+    let m = idx.len();
+    let mut l = [[0.0; 4]; 4];
+    for i in 0..m {
+        for j in 0..=i {
+            let mut s = c[idx[i]][idx[j]];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if s <= 0.0 {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][j] = s / l[j][j];
             }
         }
-        let mut pixels = Vec::new();
-        for j in 0..cam.height {
-            for i in 0..cam.width {
-                let base = 4 * (j as usize * cam.width as usize + i as usize);
-                let mut ob = Observation {
-                    pixel: [i, j],
-                    dir: cam.ray_direction(i, j).into_inner(),
-                    s: [
-                        [coords[base], coords[base + 1]],
-                        [coords[base + 2], coords[base + 3]],
-                    ],
-                    sigma: [[1.0; 2]; 2],
-                };
-                if let Some(sd) = std {
-                    ob.sigma = [[sd[base], sd[base + 1]], [sd[base + 2], sd[base + 3]]];
-                }
-                for k in 0..2 {
-                    let ok = ob.sigma[k].iter().all(|s| s.is_finite() && *s > 0.0);
-                    if !ok {
-                        ob.s[k] = [f64::NAN; 2];
-                    }
-                }
-                if ob.has(0) || ob.has(1) {
-                    pixels.push(ob);
-                }
-            }
-        }
-        Ok(Observations {
-            camera: cam.position_mm,
-            pixels,
-            sigma_known: std.is_some(),
-        })
     }
-
-    /// Number of measured reflections `k` (0 front, 1 back).
-    pub fn count(&self, k: usize) -> usize {
-        self.pixels.iter().filter(|p| p.has(k)).count()
-    }
+    Some(l)
 }
 
 /// Which coefficients are unknowns and which data enter.
@@ -265,6 +192,7 @@ pub fn accumulate(
         .reduce(|| Normal::zeros(p), Normal::merge)
 }
 
+#[allow(clippy::needless_range_loop)]
 fn accumulate_chunk(
     chunk: &[Observation],
     obs: &Observations,
@@ -276,73 +204,43 @@ fn accumulate_chunk(
     let mut out = Normal::zeros(p);
     let mut rows = DMatrix::<f64>::zeros(4 * chunk.len(), p);
     let mut res = DVector::<f64>::zeros(4 * chunk.len());
-    let (mut f_in, mut f_out) = (
-        BasisAt::new(layout.front_terms),
-        BasisAt::new(layout.front_terms),
-    );
-    let mut bk = BasisAt::new(layout.back_terms);
+    let mut scratch = Scratch::new(layout, p);
     let mut r = 0;
-    let mut row = vec![0.0; p];
     for ob in chunk {
-        for k in 0..2 {
-            if !ob.has(k) || !(if k == 0 { layout.use_s1 } else { layout.use_s2 }) {
-                continue;
+        let m = scratch.pixel(ob, obs, station, plate, layout, p, &mut out.failed);
+        if m == 0 {
+            continue;
+        }
+        // Whiten with the covariance of the components present: residuals
+        // and rows become L⁻¹(·), C = LLᵀ.
+        let idx = &scratch.idx[..m];
+        let l = cholesky4(&ob.cov, idx).unwrap_or_else(|| {
+            let d: [f64; 4] = std::array::from_fn(|a| ob.cov[a][a]);
+            let mut l = [[0.0; 4]; 4];
+            for (i, &a) in idx.iter().enumerate() {
+                l[i][i] = d[a].sqrt();
             }
-            let traced = if k == 0 {
-                front_path(plate, &obs.camera, &ob.dir, &station.screen)
-            } else {
-                back_path(plate, &obs.camera, &ob.dir, &station.screen)
-            };
-            let Ok(path) = traced else {
-                out.failed[k] += 1;
-                continue;
-            };
+            l
+        });
+        for i in 0..m {
+            let mut v = scratch.res[i];
+            for k in 0..i {
+                v -= l[i][k] * scratch.res[k];
+            }
+            scratch.res[i] = v / l[i][i];
+            res[r + i] = scratch.res[i];
             if p > 0 {
-                f_in.eval(plate.front.basis(), path.hits[0]);
-                if k == 1 {
-                    bk.eval(plate.back.basis(), path.hits[1]);
-                    f_out.eval(plate.front.basis(), path.hits[2]);
-                }
-            }
-            for c in 0..2 {
-                let inv_s = 1.0 / ob.sigma[k][c];
-                res[r] = (path.uv[c].v - ob.s[k][c]) * inv_s;
-                if p > 0 {
-                    row.iter_mut().for_each(|x| *x = 0.0);
-                    add_slot(
-                        &mut row,
-                        &path,
-                        c,
-                        SLOT_FRONT_IN,
-                        &f_in,
-                        |t| layout.front_col(t),
-                        inv_s,
-                    );
-                    if k == 1 {
-                        add_slot(
-                            &mut row,
-                            &path,
-                            c,
-                            SLOT_BACK,
-                            &bk,
-                            |t| layout.back_col(t),
-                            inv_s,
-                        );
-                        add_slot(
-                            &mut row,
-                            &path,
-                            c,
-                            SLOT_FRONT_OUT,
-                            &f_out,
-                            |t| layout.front_col(t),
-                            inv_s,
-                        );
+                for c in 0..p {
+                    let mut x = scratch.rows[i][c];
+                    for k in 0..i {
+                        x -= l[i][k] * scratch.rows[k][c];
                     }
-                    rows.row_mut(r).copy_from_slice(&row);
+                    scratch.rows[i][c] = x / l[i][i];
                 }
-                r += 1;
+                rows.row_mut(r + i).copy_from_slice(&scratch.rows[i]);
             }
         }
+        r += m;
     }
     let used = res.rows(0, r);
     out.chi2 = used.norm_squared();
@@ -354,3 +252,112 @@ fn accumulate_chunk(
     }
     out
 }
+
+/// Per-pixel work space: basis values at the hits, raw rows and residuals.
+struct Scratch {
+    f_in: BasisAt,
+    f_out: BasisAt,
+    bk: BasisAt,
+    rows: [Vec<f64>; 4],
+    res: [f64; 4],
+    idx: [usize; 4],
+}
+
+impl Scratch {
+    fn new(layout: &Layout, p: usize) -> Self {
+        Scratch {
+            f_in: BasisAt::new(layout.front_terms),
+            f_out: BasisAt::new(layout.front_terms),
+            bk: BasisAt::new(layout.back_terms),
+            rows: std::array::from_fn(|_| vec![0.0; p]),
+            res: [0.0; 4],
+            idx: [0; 4],
+        }
+    }
+
+    /// Traces the pixel's measured paths; fills unweighted residuals and
+    /// rows for the `m` components present (returned), in `idx` order.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+    fn pixel(
+        &mut self,
+        ob: &Observation,
+        obs: &Observations,
+        station: &Station,
+        plate: &Plate,
+        layout: &Layout,
+        p: usize,
+        failed: &mut [usize; 2],
+    ) -> usize {
+        let mut m = 0;
+        for k in 0..2 {
+            if !ob.has(k) || !(if k == 0 { layout.use_s1 } else { layout.use_s2 }) {
+                continue;
+            }
+            let traced = if k == 0 {
+                front_path(plate, &obs.camera, &ob.dir, &station.screen)
+            } else {
+                back_path(plate, &obs.camera, &ob.dir, &station.screen)
+            };
+            let Ok(path) = traced else {
+                failed[k] += 1;
+                continue;
+            };
+            if p > 0 && layout.fit_front {
+                self.f_in.eval(plate.front.basis(), path.hits[0]);
+                if k == 1 {
+                    self.f_out.eval(plate.front.basis(), path.hits[2]);
+                }
+            }
+            if p > 0 && layout.fit_back && k == 1 {
+                self.bk.eval(plate.back.basis(), path.hits[1]);
+            }
+            for c in 0..2 {
+                self.idx[m] = 2 * k + c;
+                self.res[m] = path.uv[c].v - ob.s[k][c];
+                if p > 0 {
+                    let row = &mut self.rows[m];
+                    row.iter_mut().for_each(|x| *x = 0.0);
+                    if layout.fit_front {
+                        add_slot(
+                            row,
+                            &path,
+                            c,
+                            SLOT_FRONT_IN,
+                            &self.f_in,
+                            |t| layout.front_col(t),
+                            1.0,
+                        );
+                    }
+                    if k == 1 && layout.fit_back {
+                        add_slot(
+                            row,
+                            &path,
+                            c,
+                            SLOT_BACK,
+                            &self.bk,
+                            |t| layout.back_col(t),
+                            1.0,
+                        );
+                    }
+                    if k == 1 && layout.fit_front {
+                        add_slot(
+                            row,
+                            &path,
+                            c,
+                            SLOT_FRONT_OUT,
+                            &self.f_out,
+                            |t| layout.front_col(t),
+                            1.0,
+                        );
+                    }
+                }
+                m += 1;
+            }
+        }
+        m
+    }
+}
+
+#[cfg(test)]
+#[path = "problem_tests.rs"]
+mod tests;

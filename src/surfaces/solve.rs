@@ -31,6 +31,9 @@ pub struct SurfaceOptions {
     pub joint: bool,
     /// The element's rim beyond the aperture, mm.
     pub edge_margin_mm: f64,
+    /// Weight by the covariance averaged over a `(2k + 1)²` pixel
+    /// neighbourhood (see [`Observations::smoothed_covariance`]); 0: as given.
+    pub covariance_smoothing_px: u32,
 }
 
 impl Default for SurfaceOptions {
@@ -43,6 +46,7 @@ impl Default for SurfaceOptions {
             back_piston: false,
             joint: true,
             edge_margin_mm: crate::trace::DEFAULT_EDGE_MARGIN_MM,
+            covariance_smoothing_px: 2,
         }
     }
 }
@@ -100,6 +104,13 @@ pub fn reconstruct(
     station: &Station,
     opts: &SurfaceOptions,
 ) -> Result<SurfaceSolution, SurfaceError> {
+    let smoothed;
+    let obs = if opts.covariance_smoothing_px > 0 && obs.sigma_known {
+        smoothed = obs.smoothed_covariance(opts.covariance_smoothing_px);
+        &smoothed
+    } else {
+        obs
+    };
     let e = &station.element;
     let (radius, centre) = (
         e.aperture_radius_mm,
