@@ -32,6 +32,11 @@ enum BenchKind {
     /// Spectral error against the Cramér–Rao bound over plate thickness and
     /// refractive index (simulated 48×48 station, paper schedule): a markdown table.
     Thickness(super::bench_table::TableArgs),
+    /// Surface solvers on the full-resolution station from traced screen
+    /// points with noise at the spectral solver's level; prints one JSON
+    /// line: front_s, back_s, back_iterations, joint_s, front_rms_err_nm,
+    /// back_rms_err_nm, the bounds, and more.
+    Surfaces(super::bench_surfaces::SurfaceBenchArgs),
 }
 
 #[derive(Args)]
@@ -65,6 +70,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchKind::Render(a) => render(a),
         BenchKind::Spectral(a) => spectral(a),
         BenchKind::Thickness(a) => super::bench_table::run(a),
+        BenchKind::Surfaces(a) => super::bench_surfaces::run(a),
     }
 }
 

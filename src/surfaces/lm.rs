@@ -11,6 +11,9 @@ use crate::station::Station;
 use crate::trace::Plate;
 use crate::zernike::ZernikeSurface;
 
+/// χ² decrease below which a step with known σ counts as converged.
+const CHI2_TOL: f64 = 1e-3;
+
 /// Stopping rules.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LmOptions {
@@ -128,15 +131,30 @@ pub fn levenberg_marquardt(
         let trial_plate = apply(plate, layout, &delta)?;
         let trial = accumulate(obs, station, &trial_plate, layout, true);
         report.iterations += 1;
+        if std::env::var_os("MFD_DEBUG_LM").is_some() {
+            eprintln!(
+                "{stage}: it {} chi2 {:.6e} -> {:.6e} step {largest:.3e} nm lambda {lambda:.1e} n {} -> {}",
+                report.iterations, cur.chi2, trial.chi2, cur.n_resid, trial.n_resid
+            );
+        }
         // A step that loses paths is not comparable by χ² alone: reject it.
         let comparable = trial.n_resid >= cur.n_resid;
         if comparable && trial.chi2 <= cur.chi2 {
+            let drop = cur.chi2 - trial.chi2;
             *plate = trial_plate;
             cur = trial;
             lambda = (lambda * 0.1).max(1e-12);
             if largest < opts.step_tol_nm {
                 report.converged = true;
                 report.reason = format!("step below {} nm", opts.step_tol_nm);
+                break;
+            }
+            // With known σ, a χ² drop below 1e-3 means the step moved every
+            // coefficient by far less than its own σ (≤ 0.03 σ): converged
+            // in the statistical sense; noise-free data use the step rule.
+            if obs.sigma_known && drop < CHI2_TOL {
+                report.converged = true;
+                report.reason = format!("χ² drop {drop:.1e} below {CHI2_TOL}");
                 break;
             }
         } else {

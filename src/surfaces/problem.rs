@@ -202,7 +202,8 @@ fn accumulate_chunk(
     p: usize,
 ) -> Normal {
     let mut out = Normal::zeros(p);
-    let mut rows = DMatrix::<f64>::zeros(4 * chunk.len(), p);
+    // One column per residual (contiguous in column-major storage).
+    let mut cols = DMatrix::<f64>::zeros(p, 4 * chunk.len());
     let mut res = DVector::<f64>::zeros(4 * chunk.len());
     let mut scratch = Scratch::new(layout, p);
     let mut r = 0;
@@ -237,7 +238,7 @@ fn accumulate_chunk(
                     }
                     scratch.rows[i][c] = x / l[i][i];
                 }
-                rows.row_mut(r + i).copy_from_slice(&scratch.rows[i]);
+                cols.column_mut(r + i).copy_from_slice(&scratch.rows[i]);
             }
         }
         r += m;
@@ -246,9 +247,12 @@ fn accumulate_chunk(
     out.chi2 = used.norm_squared();
     out.n_resid = r;
     if p > 0 && r > 0 {
-        let j = rows.rows(0, r);
-        out.a.gemm_tr(1.0, &j, &j, 0.0);
-        out.b.gemv_tr(1.0, &j, &used, 0.0);
+        // JᵀJ as (Jᵀ)(Jᵀ)ᵀ through `gemm`, which nalgebra hands to
+        // matrixmultiply's blocked kernel (`gemm_tr` would use dot products).
+        let jt = cols.columns(0, r);
+        let j = jt.transpose();
+        out.a.gemm(1.0, &jt, &j, 0.0);
+        out.b.gemv(1.0, &jt, &used, 0.0);
     }
     out
 }

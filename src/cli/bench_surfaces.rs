@@ -1,0 +1,131 @@
+//! `mfd bench surfaces`: the surface solvers on the full-resolution
+//! station, from traced screen points with noise at the spectral solver's
+//! level; one JSON line of timings and errors.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+use mfd::sim::RandomSurfaceSpec;
+use mfd::station::Station;
+use mfd::surfaces::report::{figures, rms_difference_nm};
+use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
+use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+
+/// Arguments of `mfd bench surfaces`.
+#[derive(Args)]
+pub struct SurfaceBenchArgs {
+    /// Station (default: the paper's, full resolution).
+    #[arg(long, default_value = "calib/paper-sim.toml")]
+    station: PathBuf,
+    /// Zernike terms of the truth and of the fit.
+    #[arg(long, default_value_t = 150)]
+    terms: usize,
+    /// σ of S1 per coordinate, screen px. The default is what the spectral
+    /// solver achieved on this station (2000 frames, 12 bit, 5 % noise):
+    /// RMS error 0.110 px for S1 (docs/figures.md); 0 for noise-free.
+    #[arg(long, default_value_t = 0.110)]
+    sigma1_px: f64,
+    /// σ of S2 per coordinate, screen px (measured there: 0.121 px).
+    #[arg(long, default_value_t = 0.121)]
+    sigma2_px: f64,
+    /// Seed of the truth surfaces and of the noise.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Skip the joint refinement (front from slopes, back with the front fixed).
+    #[arg(long)]
+    no_joint: bool,
+}
+
+/// Runs the benchmark.
+pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
+    anyhow::ensure!((3..=231).contains(&args.terms), "--terms must be 3..=231");
+    let station = Station::load(&args.station)?;
+    let e = &station.element;
+    let spec = RandomSurfaceSpec {
+        n_terms: args.terms,
+        ..RandomSurfaceSpec::default()
+    };
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    let (front, back) = spec.draw_pair(e.aperture_radius_mm, centre, args.seed)?;
+    let t = Instant::now();
+    let plate = Plate::new(
+        &station,
+        front.clone(),
+        back.clone(),
+        DEFAULT_EDGE_MARGIN_MM,
+    );
+    let view = TracedView::trace(&station, &plate);
+    let trace_s = t.elapsed().as_secs_f64();
+    let mut coords = view.screen_coords();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed.wrapping_add(1000));
+    let mut std = vec![0.0; coords.len()];
+    for (k, (c, s)) in coords.iter_mut().zip(std.iter_mut()).enumerate() {
+        let sigma = if (k / 2) % 2 == 0 {
+            args.sigma1_px
+        } else {
+            args.sigma2_px
+        };
+        let z: f64 = StandardNormal.sample(&mut rng);
+        *c += sigma * z;
+        *s = sigma;
+    }
+    let noisy = args.sigma1_px > 0.0 || args.sigma2_px > 0.0;
+    let unc = if noisy {
+        Uncertainty::Std(&std)
+    } else {
+        Uncertainty::Unknown
+    };
+    let obs = Observations::from_maps(&station, &coords, unc)?;
+    let opts = SurfaceOptions {
+        terms: Some(args.terms),
+        joint: !args.no_joint,
+        ..SurfaceOptions::default()
+    };
+    let t = Instant::now();
+    let sol = reconstruct(&obs, &station, &opts)?;
+    let total_s = t.elapsed().as_secs_f64();
+    let stage = |name: &str| sol.stages.iter().find(|s| s.name == name);
+    let secs = |name: &str| stage(name).map_or(0.0, |s| s.seconds);
+    let iters = |name: &str| {
+        stage(name).map_or(0, |s| {
+            s.lm.as_ref().map_or_else(
+                || s.front.as_ref().map_or(0, |f| f.iterations),
+                |l| l.iterations,
+            )
+        })
+    };
+    let (ff, fb) = (figures(&sol, false), figures(&sol, true));
+    println!(
+        "{{\"bench\":\"surfaces\",\"station\":\"{}\",\"terms\":{},\"pixels_s1\":{},\"pixels_s2\":{},\
+         \"sigma_px\":[{},{}],\"trace_s\":{trace_s:.3},\"front_s\":{:.3},\"front_iterations\":{},\
+         \"back_s\":{:.3},\"back_iterations\":{},\"joint_s\":{:.3},\"joint_iterations\":{},\
+         \"total_s\":{total_s:.3},\"front_rms_err_nm\":{:.4e},\"back_rms_err_nm\":{:.4e},\
+         \"front_bound_nm\":{:.4},\"back_bound_nm\":{:.4},\"reduced_chi2\":{:.4},\
+         \"condition_number\":{:.4e},\"threads\":{}}}",
+        args.station.display(),
+        args.terms,
+        obs.count(0),
+        obs.count(1),
+        args.sigma1_px,
+        args.sigma2_px,
+        secs("front slopes"),
+        iters("front slopes"),
+        secs("back"),
+        iters("back"),
+        secs("joint"),
+        iters("joint"),
+        rms_difference_nm(sol.front.coefficients_nm(), front.coefficients_nm()),
+        rms_difference_nm(sol.back.coefficients_nm(), back.coefficients_nm()),
+        ff.error_rms_nm,
+        fb.error_rms_nm,
+        sol.reduced_chi2,
+        sol.condition_number,
+        rayon::current_num_threads()
+    );
+    Ok(())
+}
