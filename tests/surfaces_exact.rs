@@ -60,6 +60,40 @@ fn run(station: &Station, terms: Option<usize>, seed: u64) -> (f64, f64) {
     (ef, eb)
 }
 
+/// The 48×48 bench station (`mfd bench thickness`) with another plate and tilt.
+fn tilted_station(thickness_mm: f64, index: f64, tilt_deg: f64) -> Station {
+    use mfd::station::{CameraProfile, DisplayProfile, Element, SymmetricLayout};
+    let camera = CameraProfile {
+        format: "mfd-camera-profile/1".into(),
+        model: "bench 48x48".into(),
+        resolution: [48, 48],
+        pixel_pitch_um: 10.0,
+        bit_depth: 16,
+    };
+    let display = DisplayProfile {
+        format: "mfd-display-profile/1".into(),
+        model: "paper LCD".into(),
+        resolution: [1600, 1200],
+        pixel_pitch_mm: 0.27,
+        diagonal_in: 21.3,
+        gamma: 2.2,
+        settle_ms: 30.0,
+    };
+    let layout = SymmetricLayout {
+        camera_height_mm: 825.0,
+        screen_height_mm: 825.0,
+        tilt_deg,
+        focal_length_mm: 6.0,
+        element: Element {
+            refractive_index: index,
+            thickness_mm,
+            aperture_radius_mm: 25.5,
+            aperture_center_mm: nalgebra::Point2::origin(),
+        },
+    };
+    layout.build(&camera, &display).unwrap()
+}
+
 #[test]
 fn fixture_station_noise_free_36_terms() {
     let station = Station::load(&common::public_small().join("station.toml")).unwrap();
@@ -72,4 +106,48 @@ fn fixture_station_noise_free_terms_chosen() {
     let station = Station::load(&common::public_small().join("station.toml")).unwrap();
     let (ef, eb) = run(&station, None, 6);
     assert!(ef < 0.1 && eb < 0.5, "front {ef} back {eb}");
+}
+
+/// A 40 mm, n = 2.4 plate at 35°: the back is seen over a small part of
+/// the disk. With 231 terms fixed the back stage stops and names the
+/// condition number; when the data choose, the back model shrinks until it
+/// is determined (and the stage reports the condition number it reached).
+#[test]
+fn undetermined_back_stops_or_shrinks() {
+    let station = tilted_station(40.0, 2.4, 35.0);
+    let e = &station.element;
+    let spec = RandomSurfaceSpec {
+        n_terms: 231,
+        ..RandomSurfaceSpec::default()
+    };
+    let (front, back) = spec.draw_pair(e.aperture_radius_mm, [0.0, 0.0], 9).unwrap();
+    let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
+    let coords = TracedView::trace(&station, &plate).screen_coords();
+    let obs =
+        Observations::from_maps(&station, &coords, mfd::surfaces::Uncertainty::Unknown).unwrap();
+    let err = reconstruct(
+        &obs,
+        &station,
+        &SurfaceOptions {
+            terms: Some(231),
+            ..SurfaceOptions::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("ill-conditioned") && err.contains("condition number"),
+        "{err}"
+    );
+    let sol = reconstruct(
+        &obs,
+        &station,
+        &SurfaceOptions {
+            max_terms: 231,
+            ..SurfaceOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(sol.back.n_terms() < 231);
+    assert!(sol.condition_number <= mfd::surfaces::lm::MAX_CONDITION_NUMBER);
 }

@@ -37,6 +37,10 @@ enum BenchKind {
     /// line: front_s, back_s, back_iterations, joint_s, front_rms_err_nm,
     /// back_rms_err_nm, the bounds, and more.
     Surfaces(super::bench_surfaces::SurfaceBenchArgs),
+    /// Surface solvers at the extremes (thickness 1–40 mm, n 1.4–2.4,
+    /// incidence 5–35°, 15–231 terms, a back 10 µm out of flat) on the 48×48
+    /// station: a markdown table of errors, iterations and outcomes.
+    Extremes(super::bench_extremes::ExtremesArgs),
 }
 
 #[derive(Args)]
@@ -71,6 +75,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchKind::Spectral(a) => spectral(a),
         BenchKind::Thickness(a) => super::bench_table::run(a),
         BenchKind::Surfaces(a) => super::bench_surfaces::run(a),
+        BenchKind::Extremes(a) => super::bench_extremes::run(a),
     }
 }
 

@@ -28,7 +28,16 @@ pub struct TableArgs {
 
 /// A small camera (48×48 px of 10 µm, f = 6 mm) that sees the whole Ø 51 mm
 /// element from the paper's 825 mm: every pixel a sample of the aperture.
-fn small_station(thickness_mm: f64, index: f64) -> anyhow::Result<Station> {
+pub fn small_station(thickness_mm: f64, index: f64) -> anyhow::Result<Station> {
+    small_station_tilted(thickness_mm, index, 15.0)
+}
+
+/// The same station with the camera (and screen) tilted by `tilt_deg`.
+pub fn small_station_tilted(
+    thickness_mm: f64,
+    index: f64,
+    tilt_deg: f64,
+) -> anyhow::Result<Station> {
     let camera = CameraProfile {
         format: "mfd-camera-profile/1".into(),
         model: "bench 48x48".into(),
@@ -48,7 +57,7 @@ fn small_station(thickness_mm: f64, index: f64) -> anyhow::Result<Station> {
     let layout = SymmetricLayout {
         camera_height_mm: 825.0,
         screen_height_mm: 825.0,
-        tilt_deg: 15.0,
+        tilt_deg,
         focal_length_mm: 6.0,
         element: Element {
             refractive_index: index,

@@ -1,6 +1,7 @@
 //! Subcommands of the `mfd` binary.
 
 pub mod bench;
+pub mod bench_extremes;
 pub mod bench_surfaces;
 pub mod bench_table;
 pub mod compare;

@@ -11,6 +11,24 @@ use crate::station::Station;
 use crate::trace::Plate;
 use crate::zernike::ZernikeSurface;
 
+/// Largest condition number of the weighted Jacobian a stage accepts. The
+/// normal equations square it; at 1e7 their solution keeps ~2 significant
+/// digits in f64 (1e-16 × 1e14), and the coefficient uncertainties are
+/// already 1e7 times the best-determined one: the data do not determine
+/// the model, and a number is better than a meaningless surface.
+pub const MAX_CONDITION_NUMBER: f64 = 1e7;
+
+/// Condition number of the weighted Jacobian, √(λmax/λmin) of JᵀJ.
+pub fn condition_number(n: &Normal) -> f64 {
+    let eig = n.a.clone().symmetric_eigen().eigenvalues;
+    let (lo, hi) = (eig.min(), eig.max());
+    if lo > 0.0 {
+        (hi / lo).sqrt()
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// χ² decrease below which a step with known σ counts as converged.
 const CHI2_TOL: f64 = 1e-3;
 
@@ -104,6 +122,13 @@ pub fn levenberg_marquardt(
             stage,
             have: cur.n_resid,
             need: p,
+        });
+    }
+    let condition_number = condition_number(&cur);
+    if condition_number > MAX_CONDITION_NUMBER {
+        return Err(SurfaceError::IllConditioned {
+            stage,
+            condition_number,
         });
     }
     let mut report = LmReport {

@@ -141,11 +141,17 @@ pub fn reconstruct(
         use_s2: true,
     };
     if obs.count(1) > 0 {
+        if opts.terms.is_none() {
+            determined_layout(obs, station, &mut plate, &mut layout)?;
+        }
         lm_stage(obs, station, &mut plate, &layout, "back", opts, &mut stages)?;
     }
     layout.fit_front = true;
     layout.use_s1 = true;
     layout.fit_back = obs.count(1) > 0;
+    if opts.terms.is_none() {
+        determined_layout(obs, station, &mut plate, &mut layout)?;
+    }
     let mut normal = if opts.joint || opts.terms.is_none() {
         lm_stage(
             obs,
@@ -187,6 +193,35 @@ pub fn reconstruct(
         }
     }
     finish(plate, layout, normal, stages, choice, obs.sigma_known)
+}
+
+/// When the term count is the data's to choose: shrink the model (the
+/// back first, by full Noll orders, then the front) until its Jacobian at
+/// the current surfaces is conditioned below
+/// [`super::lm::MAX_CONDITION_NUMBER`]. The back is seen only where the
+/// refracted rays land, which a thick plate at oblique incidence shrinks.
+fn determined_layout(
+    obs: &Observations,
+    station: &Station,
+    plate: &mut Plate,
+    layout: &mut Layout,
+) -> Result<(), SurfaceError> {
+    loop {
+        let n = super::problem::accumulate(obs, station, plate, layout, true);
+        if super::lm::condition_number(&n) <= super::lm::MAX_CONDITION_NUMBER {
+            return Ok(());
+        }
+        let smaller = |t: usize| super::select::candidates(t).into_iter().rev().nth(1);
+        if let Some(t) = smaller(layout.back_terms).filter(|_| layout.fit_back) {
+            layout.back_terms = t;
+            plate.back = truncate(&plate.back, t)?;
+        } else if let Some(t) = smaller(layout.front_terms).filter(|_| layout.fit_front) {
+            layout.front_terms = t;
+            plate.front = truncate(&plate.front, t)?;
+        } else {
+            return Ok(()); // the stage itself reports the condition number
+        }
+    }
 }
 
 fn lm_stage(
