@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use mfd::plot::{coefficient_chart_png, height_map_png};
+use mfd::plot::{coefficient_chart_png, height_map_png, line_plot_png, Panel, Series};
 
 /// A 120×100 map: a circular aperture (NaN outside) holding astigmatism,
 /// coma and a ripple, in nm.
@@ -41,6 +41,68 @@ fn coefficients(n: usize) -> (Vec<f64>, Vec<f64>) {
     (v, s)
 }
 
+/// A convergence study: RMS error (nm) and compute time (s) against frames
+/// per direction, with a NaN (a failed run) in one series.
+fn convergence(dir: &std::path::Path) -> Result<(), mfd::plot::PlotError> {
+    let frames = [4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
+    let curve = |a: f64, floor: f64| -> Vec<(f64, f64)> {
+        frames
+            .iter()
+            .map(|&n| (n, (a * a / n + floor * floor).sqrt()))
+            .collect()
+    };
+    let spectral = curve(40.0, 0.8);
+    let mut phase_step = curve(90.0, 2.5);
+    phase_step[3].1 = f64::NAN;
+    let bound = curve(25.0, 0.0);
+    let time =
+        |a: f64, b: f64| -> Vec<(f64, f64)> { frames.iter().map(|&n| (n, a + b * n)).collect() };
+    let (t_spectral, t_phase) = (time(0.4, 0.021), time(0.1, 0.012));
+    let rms = [
+        Series {
+            label: "spectral",
+            points: &spectral,
+        },
+        Series {
+            label: "phase-step",
+            points: &phase_step,
+        },
+        Series {
+            label: "Cramer-Rao bound",
+            points: &bound,
+        },
+    ];
+    let secs = [
+        Series {
+            label: "spectral",
+            points: &t_spectral,
+        },
+        Series {
+            label: "phase-step",
+            points: &t_phase,
+        },
+    ];
+    let panels = [
+        Panel {
+            title: "Convergence",
+            x_label: "frames per direction",
+            y_label: "RMS surface error (nm)",
+            log_x: true,
+            log_y: true,
+            series: &rms,
+        },
+        Panel {
+            title: "Cost",
+            x_label: "frames per direction",
+            y_label: "compute time (s)",
+            log_x: false,
+            log_y: false,
+            series: &secs,
+        },
+    ];
+    line_plot_png(&dir.join("lines.png"), &panels)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or("/tmp/plot-demo".into()));
     std::fs::create_dir_all(&dir)?;
@@ -76,6 +138,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = format!("Front surface, {n} Zernike terms (Noll 4..{})", n + 3);
         coefficient_chart_png(&dir.join(format!("chart_{n}.png")), &v, &s, 4, &t)?;
     }
+    convergence(&dir)?;
     println!("pictures in {}", dir.display());
     Ok(())
 }

@@ -5,7 +5,9 @@
 //!   [`colormap`], with a colour bar and a title.
 //! - [`coefficient_chart_png`]: Zernike coefficients (nm) against Noll index
 //!   as bars with ±1σ error bars.
-//! - [`nice_ticks`]: the 1-2-5 axis ticks both use.
+//! - [`line_plot_png`]: panels of line series side by side, on linear or
+//!   logarithmic axes, with markers and legends.
+//! - [`nice_ticks`]: the 1-2-5 axis ticks they use.
 //!
 //! Pictures follow screen convention: pixel (0, 0) at the top left, rows
 //! downwards; height-map row 0 is drawn at the top. Data that leave nothing
@@ -18,12 +20,16 @@ mod chart;
 pub mod colormap;
 pub mod font;
 mod height_map;
+mod lines;
+mod lines_axis;
+mod strokes;
 mod ticks;
 
 use std::path::PathBuf;
 
 pub use chart::{coefficient_chart_png, MAX_BARS};
 pub use height_map::height_map_png;
+pub use lines::{line_plot_png, Panel, Series, MAX_SERIES};
 pub use ticks::nice_ticks;
 
 /// What went wrong drawing a picture.
