@@ -11,6 +11,7 @@ pub mod simulate;
 pub mod station;
 pub mod surfaces_stage;
 pub mod trace;
+pub mod tradeoff;
 
 use std::path::Path;
 

@@ -77,23 +77,25 @@ pub fn run(
     let obs = Observations::from_maps(station, coords, unc)?;
     let sol = reconstruct(&obs, station, opts).context("surface stage")?;
     let seconds = t.elapsed().as_secs_f64();
-    SurfacesFile::from_surfaces(&sol.front, &sol.back).save(&out.join("surfaces.json"))?;
+    let mut file = SurfacesFile::from_surfaces(&sol.front, &sol.back);
+    if !sol.back_fitted {
+        file.back = None; // spec: a surface that was not reconstructed is null
+        println!("back: not reconstructed (no back reflection was measured)");
+    }
+    file.save(&out.join("surfaces.json"))?;
     let (front, back) = (figures(&sol, false), figures(&sol, true));
-    for (name, s) in [("front", &sol.front), ("back", &sol.back)] {
+    let mut surfaces = vec![("front", &sol.front, &front)];
+    if sol.back_fitted {
+        surfaces.push(("back", &sol.back, &back));
+    }
+    for (name, s, f) in surfaces {
         let grid = height_grid(s, GRID);
         npy::write_f64(
             &out.join(format!("{name}_height_nm.npy")),
             &[GRID, GRID],
             &grid,
         )?;
-        super::pictures::surface(
-            out,
-            name,
-            &grid,
-            GRID,
-            if name == "front" { &front } else { &back },
-        )?;
-        let f = if name == "front" { &front } else { &back };
+        super::pictures::surface(out, name, &grid, GRID, f)?;
         super::pictures::coefficients(out, name, f)?;
     }
     let summary = summary_json(&obs, &sol, &front, &back, seconds);
@@ -140,7 +142,8 @@ fn summary_json(
         "pixels": {"s1": obs.count(0), "s2": obs.count(1)},
         "sigma_from_data": obs.sigma_known,
         "figures_note": "RMS, PV and pictures with piston and tilt (Noll 1-3) removed; front piston fixed at 0 by the reference plane; back piston fixed at the nominal thickness",
-        "front": front, "back": back,
+        "front": front,
+        "back": if sol.back_fitted { json!(back) } else { serde_json::Value::Null },
         "terms": choice,
         "stages": stages,
         "chi2": sol.chi2, "residuals": sol.n_resid, "reduced_chi2": sol.reduced_chi2,
@@ -156,7 +159,10 @@ fn print_summary(
     back: &SurfaceFigures,
     seconds: f64,
 ) {
-    for (name, f) in [("front", front), ("back", back)] {
+    for (name, f) in [("front", front), ("back", back)]
+        .into_iter()
+        .take(1 + usize::from(sol.back_fitted))
+    {
         println!(
             "{name}: {} terms, RMS {:.2} ± {:.2} nm, PV {:.1} nm (piston and tilt removed); \
              surface uncertainty {:.2} nm RMS",

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use super::{Observations, SurfaceError};
 use crate::station::Station;
 use crate::trace::{intersect, Plate};
-use crate::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
+use crate::zernike::{ZernikeBasis, ZernikeSurface};
 
 /// One slope measurement: where, the two slopes, and the weight.
 #[derive(Debug, Clone, Copy)]
@@ -73,10 +73,11 @@ fn fit_slopes_parallel(
     };
     let chol = a
         .cholesky()
-        .filter(|_| condition_number < crate::zernike::MAX_CONDITION_NUMBER)
-        .ok_or(SurfaceError::Zernike(ZernikeError::IllConditioned {
+        .filter(|_| condition_number <= super::lm::MAX_CONDITION_NUMBER)
+        .ok_or(SurfaceError::IllConditioned {
+            stage: "front slopes",
             condition_number,
-        }))?;
+        })?;
     let x = chol.solve(&b);
     let mut c = vec![0.0; n];
     c[1..].copy_from_slice(x.as_slice());

@@ -69,8 +69,11 @@ pub struct Stage {
 pub struct SurfaceSolution {
     /// Front surface (piston 0: the reference plane).
     pub front: ZernikeSurface,
-    /// Back surface (departure from `z = −thickness`).
+    /// Back surface (departure from `z = −thickness`); flat and not
+    /// reconstructed unless `back_fitted`.
     pub back: ZernikeSurface,
+    /// Whether the back was reconstructed (some back reflection was measured).
+    pub back_fitted: bool,
     /// σ of every front coefficient, nm (0 for the fixed piston).
     pub front_std_nm: Vec<f64>,
     /// σ of every back coefficient, nm (0 where fixed).
@@ -314,6 +317,7 @@ fn finish(
     Ok(SurfaceSolution {
         front: plate.front,
         back: plate.back,
+        back_fitted: layout.fit_back,
         front_std_nm,
         back_std_nm,
         covariance,

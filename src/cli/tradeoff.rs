@@ -1,0 +1,304 @@
+//! `mfd tradeoff`: speed against accuracy, measured. The simulated station
+//! over a grid of schedules (frames per direction), Zernike term counts and
+//! iteration limits; surface errors against the truth, the solver's own
+//! uncertainty, and compute time; a CSV, a markdown table and a plot.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+
+use mfd::acquisition::FrameInfo;
+use mfd::patterns::Schedule;
+use mfd::plot::{line_plot_png, Panel, Series};
+use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
+use mfd::station::Station;
+use mfd::surfaces::lm::LmOptions;
+use mfd::surfaces::report::{figures, rms_difference_nm};
+use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
+use mfd::trace::{Plate, TracedView};
+use mfd::zernike::ZernikeSurface;
+
+/// Arguments of `mfd tradeoff`.
+#[derive(Args)]
+pub struct TradeoffArgs {
+    /// Station; default: the 48×48 bench station (10 mm, n = 1.5), whose
+    /// every pixel samples the Ø 51 mm aperture, so a grid runs in minutes.
+    #[arg(long)]
+    station: Option<PathBuf>,
+    /// Frames per direction (τ from 0.5 in steps of 0.5: τ_stop = 0.5 N).
+    #[arg(long, value_delimiter = ',', default_value = "50,100,200,400")]
+    frames: Vec<usize>,
+    /// Zernike terms per surface.
+    #[arg(long, value_delimiter = ',', default_value = "15,36,66")]
+    terms: Vec<usize>,
+    /// Iteration limits (spectral and surface Levenberg–Marquardt alike).
+    #[arg(long, value_delimiter = ',', default_value = "3,30")]
+    max_iter: Vec<usize>,
+    /// Read noise, fraction of full scale.
+    #[arg(long, default_value_t = 0.02)]
+    noise: f64,
+    /// Seed of the surfaces (36 terms, 60 nm RMS) and the noise.
+    #[arg(long, default_value_t = 5)]
+    seed: u64,
+    /// Output folder: tradeoff.csv, tradeoff.md, tradeoff.png.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// One grid point's outcome.
+struct Row {
+    frames: usize,
+    terms: usize,
+    max_iter: usize,
+    found: [f64; 2],
+    error_nm: [f64; 2],
+    reported_nm: [f64; 2],
+    spectral_s: f64,
+    surfaces_s: f64,
+    note: String,
+}
+
+/// Runs `mfd tradeoff`.
+pub fn run(args: &TradeoffArgs) -> anyhow::Result<()> {
+    let station = match &args.station {
+        Some(p) => Station::load(p)?,
+        None => super::bench_table::small_station(10.0, 1.5)?,
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let e = &station.element;
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    let (front, back) =
+        RandomSurfaceSpec::default().draw_pair(e.aperture_radius_mm, centre, args.seed)?;
+    let view = TracedView::trace(
+        &station,
+        &Plate::new(&station, front.clone(), back.clone(), 3.0),
+    );
+    let mut rows = Vec::new();
+    for &n in &args.frames {
+        for &it in &args.max_iter {
+            let t = Instant::now();
+            let maps = spectral(&station, &view, n, it, args)?;
+            let spectral_s = t.elapsed().as_secs_f64();
+            for &terms in &args.terms {
+                rows.push(surfaces(
+                    &station,
+                    &maps,
+                    (&front, &back),
+                    (n, terms, it),
+                    spectral_s,
+                ));
+                let r = rows.last().expect("just pushed");
+                eprintln!(
+                    "frames/dir {n}, terms {terms}, max_iter {it}: front {:.2} nm, back {:.2} nm, {:.1} s {}",
+                    r.error_nm[0], r.error_nm[1], r.spectral_s + r.surfaces_s, r.note
+                );
+            }
+        }
+    }
+    write_outputs(&rows, args)
+}
+
+/// Renders the schedule on the fly (no disk) and runs the spectral solver.
+fn spectral(
+    station: &Station,
+    view: &TracedView,
+    n: usize,
+    it: usize,
+    args: &TradeoffArgs,
+) -> anyhow::Result<SpectralMaps> {
+    let schedule = Schedule {
+        tau_start: 0.5,
+        tau_stop: 0.5 * n as f64,
+        tau_step: 0.5,
+        ..Schedule::default()
+    };
+    let patterns = schedule.patterns();
+    let params = SimParams {
+        noise_frac: args.noise,
+        seed: args.seed + n as u64,
+        ..SimParams::default()
+    };
+    let mut cam = SimCamera::new(view, &station.screen, params)?;
+    let config = SpectralConfig {
+        max_iter: it.max(1),
+        ..SpectralConfig::default()
+    };
+    let mut solver = SpectralSolver::new(station, &FrameInfo::from_patterns(&patterns), config)?;
+    let mut buf = vec![0u16; station.camera.pixel_count()];
+    for (k, p) in patterns.iter().enumerate() {
+        cam.render(p, k as u64, &mut buf);
+        solver.push_frame(k, &buf)?;
+    }
+    Ok(solver.solve()?)
+}
+
+fn surfaces(
+    station: &Station,
+    maps: &SpectralMaps,
+    truth: (&ZernikeSurface, &ZernikeSurface),
+    (frames, terms, max_iter): (usize, usize, usize),
+    spectral_s: f64,
+) -> Row {
+    let (coords, cov) = (maps.screen_coords(), maps.screen_cov());
+    let total = |k: usize| maps.pixels.iter().filter(|p| p.s[k][0].is_finite()).count() as f64;
+    let mut row = Row {
+        frames,
+        terms,
+        max_iter,
+        found: [total(0), total(1)],
+        error_nm: [f64::NAN; 2],
+        reported_nm: [f64::NAN; 2],
+        spectral_s,
+        surfaces_s: f64::NAN,
+        note: String::new(),
+    };
+    let opts = SurfaceOptions {
+        terms: Some(terms),
+        lm: LmOptions {
+            max_iter: max_iter.max(2),
+            ..LmOptions::default()
+        },
+        ..SurfaceOptions::default()
+    };
+    let t = Instant::now();
+    let result = Observations::from_maps(station, &coords, Uncertainty::Cov(&cov))
+        .and_then(|obs| reconstruct(&obs, station, &opts));
+    row.surfaces_s = t.elapsed().as_secs_f64();
+    match result {
+        Ok(sol) => {
+            row.error_nm = [
+                rms_difference_nm(sol.front.coefficients_nm(), truth.0.coefficients_nm()),
+                rms_difference_nm(sol.back.coefficients_nm(), truth.1.coefficients_nm()),
+            ];
+            row.reported_nm = [
+                figures(&sol, false).error_rms_nm,
+                figures(&sol, true).error_rms_nm,
+            ];
+            if sol
+                .stages
+                .iter()
+                .filter_map(|s| s.lm.as_ref())
+                .any(|l| !l.converged)
+            {
+                row.note = "iteration limit".into();
+            }
+            if !sol.back_fitted {
+                row.error_nm[1] = f64::NAN;
+                row.reported_nm[1] = f64::NAN;
+                row.note = "no back reflection resolved: back not reconstructed".into();
+            }
+        }
+        Err(e) => row.note = format!("stopped: {e}"),
+    }
+    row
+}
+
+fn write_outputs(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
+    let mut csv = String::from(
+        "frames_per_direction,terms,max_iter,s1_found,s2_found,front_err_nm,back_err_nm,\
+         front_reported_nm,back_reported_nm,spectral_s,surfaces_s,note\n",
+    );
+    let mut md = String::from(
+        "| frames/dir | terms | max iter | S1 / S2 found | front error (nm) | back error (nm) | \
+         reported σ front / back (nm) | spectral (s) | surfaces (s) | note |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        writeln!(
+            csv,
+            "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{}",
+            r.frames,
+            r.terms,
+            r.max_iter,
+            r.found[0],
+            r.found[1],
+            r.error_nm[0],
+            r.error_nm[1],
+            r.reported_nm[0],
+            r.reported_nm[1],
+            r.spectral_s,
+            r.surfaces_s,
+            r.note
+        )?;
+        writeln!(
+            md,
+            "| {} | {} | {} | {} / {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} | {} |",
+            r.frames,
+            r.terms,
+            r.max_iter,
+            r.found[0],
+            r.found[1],
+            r.error_nm[0],
+            r.error_nm[1],
+            r.reported_nm[0],
+            r.reported_nm[1],
+            r.spectral_s,
+            r.surfaces_s,
+            r.note
+        )?;
+    }
+    let write = |name: &str, text: &str| {
+        let p = args.out.join(name);
+        std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
+    };
+    write("tradeoff.csv", &csv)?;
+    write("tradeoff.md", &md)?;
+    plot(rows, args)?;
+    println!("{md}");
+    println!("wrote {}", args.out.join("tradeoff.{csv,md,png}").display());
+    Ok(())
+}
+
+/// Error (front and back) and compute time against frames, one series per
+/// term count at the largest iteration limit.
+fn plot(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
+    let it = args.max_iter.iter().copied().max().unwrap_or(30);
+    let mut labels = Vec::new();
+    let mut data: Vec<[Vec<(f64, f64)>; 3]> = Vec::new();
+    for &terms in &args.terms {
+        let pick = |f: &dyn Fn(&Row) -> f64| -> Vec<(f64, f64)> {
+            rows.iter()
+                .filter(|r| r.terms == terms && r.max_iter == it)
+                .map(|r| ((2 * r.frames) as f64, f(r)))
+                .collect()
+        };
+        labels.push(format!("{terms} terms"));
+        data.push([
+            pick(&|r| r.error_nm[0]),
+            pick(&|r| r.error_nm[1]),
+            pick(&|r| r.spectral_s + r.surfaces_s),
+        ]);
+    }
+    let series = |k: usize| -> Vec<Series> {
+        labels
+            .iter()
+            .zip(&data)
+            .map(|(l, d)| Series {
+                label: l,
+                points: &d[k],
+            })
+            .collect()
+    };
+    let (s0, s1, s2) = (series(0), series(1), series(2));
+    let panel = |title, y, series, log_y| Panel {
+        title,
+        x_label: "frames (both directions)",
+        y_label: y,
+        log_x: true,
+        log_y,
+        series,
+    };
+    line_plot_png(
+        &args.out.join("tradeoff.png"),
+        &[
+            panel("Front surface error", "RMS error (nm)", &s0, true),
+            panel("Back surface error", "RMS error (nm)", &s1, true),
+            panel("Compute time", "seconds (spectral + surfaces)", &s2, true),
+        ],
+    )?;
+    Ok(())
+}
