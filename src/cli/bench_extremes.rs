@@ -85,7 +85,7 @@ pub fn run(args: &ExtremesArgs) -> anyhow::Result<()> {
             super::bench_table::small_station_tilted(c.thickness_mm, c.index, c.tilt_deg)?;
         let row = match one(&station, c, args) {
             Ok(r) => r,
-            Err(e) => format!("| | | stopped: {} |", crate::error_chain(&e)),
+            Err(e) => format!("| – | – | – | – | stopped: {} |", crate::error_chain(&e)),
         };
         println!(
             "| {} | {} | {} | {} | {} | {} {row}",
