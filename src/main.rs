@@ -32,6 +32,8 @@ enum Command {
     Compare(cli::compare::CompareArgs),
     /// Benchmarks: print figures as one JSON line.
     Bench(cli::bench::BenchArgs),
+    /// Fringe display: list monitors, show one pattern fullscreen, or render one offscreen.
+    Display(cli::display::DisplayArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -43,6 +45,7 @@ fn main() -> std::process::ExitCode {
         Command::Bench(args) => cli::bench::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
         Command::Compare(args) => cli::compare::run(&args),
+        Command::Display(args) => cli::display::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
