@@ -16,6 +16,10 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy -D warnings"
 cargo clippy --all-targets --locked -- -D warnings
+echo "== cargo clippy --features display -D warnings"
+cargo clippy --all-targets --features display --locked -- -D warnings
 echo "== cargo test"
 cargo test --all-targets --locked
+echo "== cargo test --features display (fullscreen window under Xvfb)"
+cargo test --features display --all-targets --locked
 cargo test --doc --locked
