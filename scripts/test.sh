@@ -12,6 +12,11 @@ if [ ! -d "$MFD_SHARED/fixtures" ]; then
   exit 1
 fi
 
+# Mesa (the display tests' lavapipe) wants a private runtime directory.
+if [ ! -d "${XDG_RUNTIME_DIR:-}" ]; then
+  XDG_RUNTIME_DIR="$(mktemp -d)" && export XDG_RUNTIME_DIR
+fi
+
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy -D warnings"

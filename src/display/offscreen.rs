@@ -30,6 +30,9 @@ pub struct OffscreenDisplay {
     size: (u32, u32),
     shading: Shading,
     settle: Duration,
+    /// Schedule index of the pattern on the screen (what errors of a
+    /// readback name).
+    last_index: usize,
 }
 
 impl OffscreenDisplay {
@@ -92,6 +95,7 @@ impl OffscreenDisplay {
             size: (width, height),
             shading,
             settle,
+            last_index: 0,
         })
     }
 
@@ -124,6 +128,7 @@ impl OffscreenDisplay {
     /// # Errors
     /// [`DisplayError::Render`] when the device reports an error.
     pub fn draw(&mut self, index: usize, pattern: &Pattern) -> Result<Instant, DisplayError> {
+        self.last_index = index;
         let submission = scoped(&self.device, index, || {
             let mut encoder = self
                 .device
@@ -154,15 +159,13 @@ impl OffscreenDisplay {
     /// `width × height` bytes.
     ///
     /// # Errors
-    /// [`DisplayError::Render`] (index `usize::MAX`: not one pattern's)
-    /// when the copy or the mapping fails.
+    /// [`DisplayError::Render`] naming the last drawn pattern when the copy
+    /// or the mapping fails.
     pub fn read_frame(&self) -> Result<Vec<u8>, DisplayError> {
-        let fail = |problem: String| DisplayError::Render {
-            index: usize::MAX,
-            problem,
-        };
+        let index = self.last_index;
+        let fail = |problem: String| DisplayError::Render { index, problem };
         let (width, height) = self.size;
-        scoped(&self.device, usize::MAX, || {
+        scoped(&self.device, index, || {
             let mut encoder = self
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
@@ -185,7 +188,7 @@ impl OffscreenDisplay {
             // The receiver waits below; if it is gone there is no one to tell.
             let _ = tx.send(r);
         });
-        wait_idle(&self.device, usize::MAX)?;
+        wait_idle(&self.device, index)?;
         rx.recv()
             .map_err(|_| fail("readback: the map callback never ran".into()))?
             .map_err(|e| fail(format!("readback: {e}")))?;

@@ -126,13 +126,15 @@ pub fn list_monitors() -> Result<Vec<MonitorInfo>, DisplayError> {
 /// Opens the fullscreen window of `config` and runs the event loop on the
 /// calling (main) thread while `work` runs on a thread of its own with the
 /// window's [`WindowDisplay`]. Returns `work`'s result once it has returned
-/// (the window then closes) — or [`DisplayError::Closed`]-carrying results
-/// from `work` if the window was closed first.
+/// (the window then closes). If the window is closed first (a key, the close
+/// button), `work`'s further calls to `show` return [`DisplayError::Closed`].
 ///
 /// # Errors
 /// [`DisplayError::Unavailable`] when no window, surface or adapter can be
-/// had, or the window does not exactly cover the monitor;
-/// [`DisplayError::Render`] if `work` panicked.
+/// had, or the window does not exactly cover the monitor.
+///
+/// # Panics
+/// A panic in `work` is raised again on the calling thread.
 pub fn run_fullscreen<R, F>(config: WindowConfig, work: F) -> Result<R, DisplayError>
 where
     R: Send + 'static,
@@ -167,10 +169,10 @@ where
     let ran = event_loop.run_app(&mut app);
     // Dropping the app drops any channel the worker may still wait on.
     drop(app);
-    let out = worker.join().map_err(|_| DisplayError::Render {
-        index: usize::MAX,
-        problem: "the thread showing patterns panicked".into(),
-    })?;
+    // A panic in `work` is the caller's: raise it again here.
+    let out = worker
+        .join()
+        .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
     ran.map_err(|e| DisplayError::Unavailable {
         display: "window".into(),
         problem: format!("event loop: {e}"),
