@@ -6,6 +6,10 @@ set -euo pipefail
 # Debian packages: a C toolchain and pkg-config for -sys crates.
 # Later stages add their own (libaravis-dev, xvfb, mesa-vulkan-drivers, ...).
 packages=(build-essential pkg-config)
+# Fringe display: lavapipe (Vulkan on the CPU), Xvfb and the X client libraries
+# winit loads, screenshots for the window test (xwd, ImageMagick's convert).
+packages+=(mesa-vulkan-drivers xvfb libxkbcommon-x11-0 libx11-xcb1 libxcursor1 libxi6 libxrandr2
+  imagemagick x11-apps)
 
 missing=()
 for p in "${packages[@]}"; do

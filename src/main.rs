@@ -34,6 +34,8 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Speed against accuracy: surface error and compute time over schedules, terms, iterations.
     Tradeoff(cli::tradeoff::TradeoffArgs),
+    /// Fringe display: list monitors, show one pattern fullscreen, or render one offscreen.
+    Display(cli::display::DisplayArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -46,6 +48,7 @@ fn main() -> std::process::ExitCode {
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
         Command::Compare(args) => cli::compare::run(&args),
         Command::Tradeoff(args) => cli::tradeoff::run(&args),
+        Command::Display(args) => cli::display::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

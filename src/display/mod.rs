@@ -11,6 +11,16 @@ use std::time::Instant;
 
 use crate::patterns::Pattern;
 
+pub mod levels;
+pub mod offscreen;
+mod render;
+#[cfg(feature = "display")]
+pub mod window;
+
+pub use levels::{Dither, Shading};
+pub use offscreen::OffscreenDisplay;
+pub use render::DRIVER_HINT;
+
 /// A pattern that is on the screen.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Shown {
@@ -50,6 +60,14 @@ pub enum DisplayError {
         /// Schedule index of the pattern.
         index: usize,
         /// What went wrong.
+        problem: String,
+    },
+    /// A display setting (profile value, size) is out of range.
+    #[error("display: `{field}`: {problem}")]
+    Invalid {
+        /// The setting.
+        field: &'static str,
+        /// What is wrong.
         problem: String,
     },
     /// The display was closed (window closed, key pressed, Ctrl-C).
