@@ -141,6 +141,8 @@ fn summary_json(
         "format": "mfd-summary/1",
         "pixels": {"s1": obs.count(0), "s2": obs.count(1)},
         "sigma_from_data": obs.sigma_known,
+        "outliers": {"rule": "pixel chi2 of its whitened residuals > 49 (P < 1e-9 for a correct pixel)",
+                     "count": sol.rejected.len(), "pixels_col_row": sol.rejected.iter().take(1000).collect::<Vec<_>>()},
         "figures_note": "RMS, PV and pictures with piston and tilt (Noll 1-3) removed; front piston fixed at 0 by the reference plane; back piston fixed at the nominal thickness",
         "front": front,
         "back": if sol.back_fitted { json!(back) } else { serde_json::Value::Null },
@@ -186,4 +188,11 @@ fn print_summary(
         sol.reduced_chi2,
         sol.condition_number
     );
+    if !sol.rejected.is_empty() {
+        println!(
+            "  {} pixels left out as outliers (χ² > 49), e.g. (column, row) {:?}",
+            sol.rejected.len(),
+            &sol.rejected[..sol.rejected.len().min(5)]
+        );
+    }
 }

@@ -54,6 +54,8 @@ pub struct Observations {
     /// Whether the σ came from the data (else 1 px everywhere, and the
     /// residuals set the scale of the covariance).
     pub sigma_known: bool,
+    /// Pixels `(column, row)` left out as outliers by the surface stage.
+    pub rejected: Vec<[u32; 2]>,
 }
 
 impl Observations {
@@ -107,6 +109,7 @@ impl Observations {
             camera: cam.position_mm,
             pixels,
             sigma_known: !matches!(unc, Uncertainty::Unknown),
+            rejected: Vec::new(),
         })
     }
 
@@ -165,6 +168,7 @@ impl Observations {
             camera: self.camera,
             pixels,
             sigma_known: self.sigma_known,
+            rejected: self.rejected.clone(),
         }
     }
 

@@ -212,32 +212,10 @@ fn accumulate_chunk(
         if m == 0 {
             continue;
         }
-        // Whiten with the covariance of the components present: residuals
-        // and rows become L⁻¹(·), C = LLᵀ.
-        let idx = &scratch.idx[..m];
-        let l = cholesky4(&ob.cov, idx).unwrap_or_else(|| {
-            let d: [f64; 4] = std::array::from_fn(|a| ob.cov[a][a]);
-            let mut l = [[0.0; 4]; 4];
-            for (i, &a) in idx.iter().enumerate() {
-                l[i][i] = d[a].sqrt();
-            }
-            l
-        });
+        scratch.whiten(ob, m, p);
         for i in 0..m {
-            let mut v = scratch.res[i];
-            for k in 0..i {
-                v -= l[i][k] * scratch.res[k];
-            }
-            scratch.res[i] = v / l[i][i];
             res[r + i] = scratch.res[i];
             if p > 0 {
-                for c in 0..p {
-                    let mut x = scratch.rows[i][c];
-                    for k in 0..i {
-                        x -= l[i][k] * scratch.rows[k][c];
-                    }
-                    scratch.rows[i][c] = x / l[i][i];
-                }
                 cols.column_mut(r + i).copy_from_slice(&scratch.rows[i]);
             }
         }
@@ -257,6 +235,34 @@ fn accumulate_chunk(
     out
 }
 
+/// Each pixel's χ² (sum of its whitened squared residuals) at the surfaces
+/// of `plate`; NaN where no measured path could be traced.
+pub fn pixel_chi2(
+    obs: &Observations,
+    station: &Station,
+    plate: &Plate,
+    layout: &Layout,
+) -> Vec<f64> {
+    obs.pixels
+        .par_chunks(128)
+        .flat_map_iter(|chunk| {
+            let mut scratch = Scratch::new(layout, 0);
+            let mut failed = [0; 2];
+            chunk
+                .iter()
+                .map(|ob| {
+                    let m = scratch.pixel(ob, obs, station, plate, layout, 0, &mut failed);
+                    if m == 0 {
+                        return f64::NAN;
+                    }
+                    scratch.whiten(ob, m, 0);
+                    scratch.res[..m].iter().map(|r| r * r).sum()
+                })
+                .collect::<Vec<f64>>()
+        })
+        .collect()
+}
+
 /// Per-pixel work space: basis values at the hits, raw rows and residuals.
 struct Scratch {
     f_in: BasisAt,
@@ -268,6 +274,34 @@ struct Scratch {
 }
 
 impl Scratch {
+    /// Whitens the `m` residuals (and rows, when `p > 0`) with the
+    /// covariance of the components present: `L⁻¹(·)`, `C = LLᵀ`.
+    #[allow(clippy::needless_range_loop)]
+    fn whiten(&mut self, ob: &Observation, m: usize, p: usize) {
+        let idx = &self.idx[..m];
+        let l = cholesky4(&ob.cov, idx).unwrap_or_else(|| {
+            let mut l = [[0.0; 4]; 4];
+            for (i, &a) in idx.iter().enumerate() {
+                l[i][i] = ob.cov[a][a].sqrt();
+            }
+            l
+        });
+        for i in 0..m {
+            let mut v = self.res[i];
+            for k in 0..i {
+                v -= l[i][k] * self.res[k];
+            }
+            self.res[i] = v / l[i][i];
+            for c in 0..p {
+                let mut x = self.rows[i][c];
+                for k in 0..i {
+                    x -= l[i][k] * self.rows[k][c];
+                }
+                self.rows[i][c] = x / l[i][i];
+            }
+        }
+    }
+
     fn new(layout: &Layout, p: usize) -> Self {
         Scratch {
             f_in: BasisAt::new(layout.front_terms),

@@ -66,6 +66,7 @@ fn jacobian_matches_finite_differences() {
                 camera: cam.position_mm,
                 pixels: vec![ob],
                 sigma_known: true,
+                rejected: Vec::new(),
             };
             let n = accumulate(&obs, &st, &plate, &layout, true);
             for k in 0..15 {

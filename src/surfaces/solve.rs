@@ -74,6 +74,8 @@ pub struct SurfaceSolution {
     pub back: ZernikeSurface,
     /// Whether the back was reconstructed (some back reflection was measured).
     pub back_fitted: bool,
+    /// Pixels `(column, row)` left out as outliers (χ² > [`OUTLIER_CHI2`]).
+    pub rejected: Vec<[u32; 2]>,
     /// σ of every front coefficient, nm (0 for the fixed piston).
     pub front_std_nm: Vec<f64>,
     /// σ of every back coefficient, nm (0 where fixed).
@@ -168,6 +170,23 @@ pub fn reconstruct(
     } else {
         super::problem::accumulate(obs, station, &plate, &layout, true)
     };
+    let kept;
+    let rejected = outliers(obs, station, &plate, &layout, &normal);
+    let obs = if rejected.is_empty() {
+        obs
+    } else {
+        kept = without(obs, &rejected);
+        normal = lm_stage(
+            &kept,
+            station,
+            &mut plate,
+            &layout,
+            "joint (outliers out)",
+            opts,
+            &mut stages,
+        )?;
+        &kept
+    };
     let mut choice = None;
     if opts.terms.is_none() {
         let x = free_values(&plate, &layout);
@@ -195,7 +214,9 @@ pub fn reconstruct(
             choice = Some([f, b]);
         }
     }
-    finish(plate, layout, normal, stages, choice, obs.sigma_known)
+    let mut sol = finish(plate, layout, normal, stages, choice, obs.sigma_known)?;
+    sol.rejected = obs.rejected.clone();
+    Ok(sol)
 }
 
 /// When the term count is the data's to choose: shrink the model (the
@@ -224,6 +245,59 @@ fn determined_layout(
         } else {
             return Ok(()); // the stage itself reports the condition number
         }
+    }
+}
+
+/// A pixel whose whitened χ² exceeds this is an outlier (a wrong point from
+/// the spectral stage, e.g. a mislabelled pair at the rim). For a correct
+/// pixel χ² follows χ²(≤ 4 dof): P(χ²₄ > 49) ≈ 6e-10, so on 10⁵ pixels the
+/// rule rejects an honest one with probability < 1e-4.
+pub const OUTLIER_CHI2: f64 = 49.0;
+
+/// Pixels (indices into `obs.pixels`) whose χ² at the current fit exceeds
+/// [`OUTLIER_CHI2`] (times χ²/dof when σ is estimated from the residuals).
+fn outliers(
+    obs: &Observations,
+    station: &Station,
+    plate: &Plate,
+    layout: &Layout,
+    n: &Normal,
+) -> Vec<usize> {
+    let scale = if obs.sigma_known {
+        1.0
+    } else {
+        n.chi2 / n.n_resid.saturating_sub(layout.columns()).max(1) as f64
+    };
+    if !(scale > 0.0) {
+        return Vec::new();
+    }
+    super::problem::pixel_chi2(obs, station, plate, layout)
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| **c > OUTLIER_CHI2 * scale)
+        .map(|(k, _)| k)
+        .collect()
+}
+
+fn without(obs: &Observations, rejected: &[usize]) -> Observations {
+    let mut keep = vec![true; obs.pixels.len()];
+    rejected.iter().for_each(|&k| keep[k] = false);
+    Observations {
+        camera: obs.camera,
+        pixels: obs
+            .pixels
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect(),
+        sigma_known: obs.sigma_known,
+        rejected: obs
+            .rejected
+            .iter()
+            .copied()
+            .chain(rejected.iter().map(|&k| obs.pixels[k].pixel))
+            .collect(),
     }
 }
 
@@ -318,6 +392,7 @@ fn finish(
         front: plate.front,
         back: plate.back,
         back_fitted: layout.fit_back,
+        rejected: Vec::new(),
         front_std_nm,
         back_std_nm,
         covariance,
