@@ -268,7 +268,7 @@ fn outliers(
     } else {
         n.chi2 / n.n_resid.saturating_sub(layout.columns()).max(1) as f64
     };
-    if !(scale > 0.0) {
+    if scale.is_nan() || scale <= 0.0 {
         return Vec::new();
     }
     super::problem::pixel_chi2(obs, station, plate, layout)
