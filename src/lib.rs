@@ -8,6 +8,7 @@
 #![warn(missing_docs)]
 
 pub mod acquisition;
+pub mod camera;
 pub mod conventions;
 pub mod display;
 pub mod image_io;
