@@ -12,6 +12,7 @@ pub mod camera;
 pub mod conventions;
 pub mod display;
 pub mod image_io;
+pub mod live;
 pub mod npy;
 pub mod optics;
 pub mod patterns;
