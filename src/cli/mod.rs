@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod bench_table;
 pub mod compare;
+pub mod measure;
 pub mod reconstruct;
 pub mod simulate;
 pub mod station;

@@ -1,7 +1,7 @@
 //! `mfd reconstruct`: every reconstruction stage that exists, from an
 //! acquisition folder.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -89,15 +89,20 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let read_s = t0.elapsed().as_secs_f64();
+    solve_and_write(&solver, &args.out, t0.elapsed().as_secs_f64())
+}
+
+/// The stages after the frames are in: solves, writes the maps into `out`
+/// and prints the summary (`read_s`: seconds spent getting the frames).
+/// `mfd measure` calls this with its streamed solver.
+pub fn solve_and_write(solver: &SpectralSolver, out: &Path, read_s: f64) -> anyhow::Result<()> {
     let t1 = Instant::now();
     let maps = solver.solve()?;
     let solve_s = t1.elapsed().as_secs_f64();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    maps.write(&args.out)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    maps.write(out)?;
     summarise(&maps, solver.candidate_pixels(), read_s, solve_s);
-    println!("wrote {}", args.out.join("screen_coords.npy").display());
+    println!("wrote {}", out.join("screen_coords.npy").display());
     Ok(())
 }
 
