@@ -6,6 +6,8 @@ set -euo pipefail
 # Debian packages: a C toolchain and pkg-config for -sys crates.
 # Later stages add their own (libaravis-dev, xvfb, mesa-vulkan-drivers, ...).
 packages=(build-essential pkg-config)
+# Live acquisition: libaravis 0.8 (feature aravis), libclang for v4l's bindgen (feature v4l).
+packages+=(libaravis-dev libusb-1.0-0-dev libclang-dev)
 
 missing=()
 for p in "${packages[@]}"; do

@@ -16,6 +16,10 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy -D warnings"
 cargo clippy --all-targets --locked -- -D warnings
+echo "== cargo clippy -D warnings (camera backends)"
+cargo clippy --all-targets --locked --features aravis,v4l -- -D warnings
 echo "== cargo test"
 cargo test --all-targets --locked
 cargo test --doc --locked
+echo "== cargo test (camera backends: Aravis fake camera on loopback)"
+cargo test --all-targets --locked --features aravis,v4l
