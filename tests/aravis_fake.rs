@@ -13,7 +13,9 @@ use std::time::Duration;
 
 use mfd::acquisition::Acquisition;
 use mfd::camera::aravis_fake::FakeStation;
-use mfd::camera::{Camera, CameraConfig, ScreenState, SimFaults, SimulatedCamera, TriggerMode};
+use mfd::camera::{
+    Camera, CameraConfig, ScreenState, SimFaults, SimulatedCamera, StreamStatistics, TriggerMode,
+};
 use mfd::live::{
     acquire, Counters, FrameSink, MirroredDisplay, Recorder, SequencerConfig, Session, SimDisplay,
 };
@@ -30,9 +32,10 @@ fn flat_view(station: &Station) -> TracedView {
     TracedView::trace(station, &Plate::new(station, flat.clone(), flat, 3.0))
 }
 
-#[test]
-fn fake_gige_camera_through_a_whole_acquisition() {
-    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+/// Runs 30 patterns of the fixture station through the fake camera with
+/// `loss` of its GVSP packets lost; checks every recorded frame bit-exactly
+/// against the simulator and returns the counters and stream figures.
+fn run_fake(loss: f64) -> (Counters, StreamStatistics) {
     let station = Station::load(&common::public_small().join("station.toml")).unwrap();
     let view = flat_view(&station);
     let params = SimParams {
@@ -43,6 +46,7 @@ fn fake_gige_camera_through_a_whole_acquisition() {
     let screen = ScreenState::new();
     let sim = SimulatedCamera::new(renderer(), screen.clone(), SimFaults::default());
     let mut camera = FakeStation::start(sim).unwrap();
+    camera.set_packet_loss(loss);
     assert!(!camera.describe().software_trigger);
     let config = CameraConfig {
         trigger: TriggerMode::FreeRunning,
@@ -84,15 +88,13 @@ fn fake_gige_camera_through_a_whole_acquisition() {
     };
     let mut sinks: Vec<&mut dyn FrameSink> = vec![&mut recorder];
     let report = acquire(session, &mut sinks, &mut |_: &Counters| {}).unwrap();
-    let c = &report.counters;
-    assert_eq!(c.captured, 30);
-    // The fill callback tags each frame with the pattern it saw: none of
-    // the frames picked by timestamp may carry another pattern.
-    assert_eq!(c.mismatches, 0, "{c:?}");
-    let stats = camera.statistics();
-    eprintln!("aravis fake camera: {c:?}\nstream: {stats:?}");
-    assert!(stats.completed >= 30, "{stats:?}");
     camera.stop().unwrap();
+    // Read after stop: the figures of the stream that just ended.
+    let stats = camera.statistics();
+    eprintln!(
+        "aravis fake camera, packet loss {loss}: {:?}\nstream: {stats:?}",
+        report.counters
+    );
 
     let acq = Acquisition::open(dir.path()).unwrap();
     assert_eq!(acq.complete_frames(), 30);
@@ -104,6 +106,28 @@ fn fake_gige_camera_through_a_whole_acquisition() {
         acq.read_frame(k, &mut got).unwrap();
         assert!(got == expected, "frame {k} differs from the simulator's");
     }
+    (report.counters, stats)
+}
+
+#[test]
+fn fake_gige_camera_through_a_whole_acquisition() {
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    let (c, stats) = run_fake(0.0);
+    assert_eq!(c.captured, 30);
+    // The fill callback tags each frame with the pattern it saw: none of
+    // the frames picked by timestamp may carry another pattern.
+    assert_eq!(c.mismatches, 0, "{c:?}");
+    assert!(stats.completed >= 30, "{stats:?}");
+    assert_eq!((stats.failures, stats.missing_packets), (0, 0), "{stats:?}");
+}
+
+#[test]
+fn lost_packets_give_incomplete_frames_that_are_never_recorded() {
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    // 10 % of ~5 packets per frame over ≥ 30 frames: P(no loss) ≈ 1e-7.
+    let (c, stats) = run_fake(0.1);
+    assert_eq!((c.captured, c.mismatches), (30, 0), "{c:?}");
+    assert!(c.incomplete > 0 && stats.failures > 0, "{c:?} {stats:?}");
 }
 
 #[test]

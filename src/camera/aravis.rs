@@ -5,9 +5,13 @@
 //! frames are taken. Mono8, Mono12 (unpacked, in 16 bits) and Mono16.
 //! Timestamps: the host time at which the frame's first packet arrived
 //! (`arv_buffer_get_system_timestamp`, wall clock, mapped to [`Instant`])
-//! minus the exposure time, so the estimated start of the exposure is never
-//! later than the true one (readout and transfer only make it earlier):
-//! a frame the sequencer accepts was exposed after the settle point.
+//! minus a *lead*: the exposure time, and when free running one frame
+//! period more. A camera that sustains its frame rate reads out and sends a
+//! frame within a period of the end of its exposure, so the estimate is not
+//! later than the true start of the exposure and a frame the sequencer
+//! accepts was exposed after the settle point. Triggered, the exposure
+//! follows the trigger (sent after the settle point), so only the exposure
+//! time is subtracted.
 //!
 //! The stream's statistics (completed buffers, failures, underruns, and for
 //! GigE Vision resent and missing packets) are read with
@@ -23,7 +27,7 @@ use aravis::glib::prelude::Cast;
 use aravis::prelude::*;
 use aravis::{Buffer, BufferStatus, GvStream, GvStreamOption, GvStreamSocketBuffer, Stream};
 
-use super::convert::{self, Layout};
+use super::convert::{self, FrameIdUnwrap, Layout};
 use super::{
     Camera, CameraConfig, CameraError, CameraInfo, Frame, PixelFormat, StreamStatistics,
     TriggerMode,
@@ -66,14 +70,15 @@ pub struct AravisCamera {
     camera: aravis::Camera,
     stream: Option<Stream>,
     info: CameraInfo,
-    exposure: Duration,
+    /// Subtracted from the arrival time (see the module docs).
+    lead: Duration,
     buffers: usize,
     lost: Arc<AtomicBool>,
     clock: HostClock,
-    last_raw_id: Option<u64>,
-    wraps: u64,
+    frame_ids: FrameIdUnwrap,
     tags: Option<Tags>,
     scratch: Vec<u16>,
+    last_statistics: StreamStatistics,
 }
 
 fn device_err(device: &str, e: &glib::Error) -> CameraError {
@@ -127,21 +132,22 @@ impl AravisCamera {
             camera,
             stream: None,
             info,
-            exposure: Duration::ZERO,
+            lead: Duration::ZERO,
             buffers: 8,
             lost,
             clock: HostClock::now(),
-            last_raw_id: None,
-            wraps: 0,
+            frame_ids: FrameIdUnwrap::default(),
             tags: None,
             scratch: Vec::new(),
+            last_statistics: StreamStatistics::default(),
         })
     }
 
-    /// The stream's statistics so far (zero before [`Camera::start`]).
+    /// The stream's statistics since [`Camera::start`] (after
+    /// [`Camera::stop`]: those of the last stream).
     pub fn statistics(&self) -> StreamStatistics {
         let Some(stream) = &self.stream else {
-            return StreamStatistics::default();
+            return self.last_statistics;
         };
         let (completed, failures, underruns) = stream.statistics();
         let (resent_packets, missing_packets) = stream
@@ -165,21 +171,9 @@ impl AravisCamera {
         &self.info.id
     }
 
-    /// A monotonic frame counter from GVSP ids: 16-bit ids run 1…65535
-    /// and skip 0 when they wrap, so a wrap adds 65535; 64-bit ids pass.
-    fn sequence(&mut self, raw: u64) -> u64 {
-        if let Some(last) = self.last_raw_id {
-            if raw < last && last <= 0xFFFF {
-                self.wraps += 1;
-            }
-        }
-        self.last_raw_id = Some(raw);
-        self.wraps * 0xFFFF + raw
-    }
-
     fn frame_from(&mut self, buffer: &Buffer) -> Result<Frame, CameraError> {
         let raw_id = buffer.frame_id();
-        let sequence = self.sequence(raw_id);
+        let sequence = self.frame_ids.unwrap(raw_id);
         let bad = |problem: String| CameraError::BadFrame {
             device: self.info.id.clone(),
             sequence,
@@ -222,7 +216,7 @@ impl AravisCamera {
             width: w as u32,
             height: h as u32,
             bit_depth: pf.bit_depth(),
-            timestamp: received.checked_sub(self.exposure).unwrap_or(received),
+            timestamp: received.checked_sub(self.lead).unwrap_or(received),
             sequence,
             exposed_pattern,
         })
@@ -296,7 +290,18 @@ impl Camera for AravisCamera {
             }
         }
         let exposure_us = cam.exposure_time().map_err(cfg("exposure_us"))?;
-        self.exposure = Duration::from_secs_f64(exposure_us.max(0.0) * 1e-6);
+        let period_s = match config.trigger {
+            TriggerMode::Software => 0.0,
+            TriggerMode::FreeRunning => {
+                let hz = cam.frame_rate().map_err(cfg("frame_rate_hz"))?;
+                if hz > 0.0 {
+                    1.0 / hz
+                } else {
+                    0.0
+                }
+            }
+        };
+        self.lead = Duration::from_secs_f64(exposure_us.max(0.0) * 1e-6 + period_s);
         self.buffers = config.buffers.max(2);
         let (_, _, w, h) = cam.region().map_err(cfg("region"))?;
         self.info.resolution = (w as u32, h as u32);
@@ -329,6 +334,7 @@ impl Camera for AravisCamera {
     }
 
     fn stop(&mut self) -> Result<(), CameraError> {
+        self.last_statistics = self.statistics();
         if self.stream.take().is_some() {
             let id = self.id().to_string();
             self.camera

@@ -181,6 +181,15 @@ impl FakeStation {
         self.client.statistics()
     }
 
+    /// Makes the fake camera drop each GVSP packet with probability
+    /// `ratio` (libaravis's unseeded `g_random`), to exercise incomplete
+    /// frames over the real protocol. The fake camera does not answer
+    /// packet-resend requests, so a frame that lost a packet stays
+    /// incomplete.
+    pub fn set_packet_loss(&self, ratio: f64) {
+        self.server.set_gvsp_lost_ratio(ratio.clamp(0.0, 1.0));
+    }
+
     /// The screen the simulated camera behind the fake looks at.
     pub fn screen(&self) -> &ScreenState {
         &self.fill.screen

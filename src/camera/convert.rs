@@ -185,6 +185,38 @@ pub fn v4l2_gain(gain_db: f64, range: ControlRange) -> Result<i64, RangeError> {
     snap(gain_db, "dB", raw, range)
 }
 
+/// A monotonic frame counter from GigE Vision stream frame ids: 16-bit
+/// ids run 1…65535 and skip 0 when they wrap, so a wrap adds 65535; larger
+/// (64-bit) ids pass through. A step back by less than half the 16-bit
+/// range is a late (reordered or retried) frame, not a wrap, and keeps its
+/// place.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FrameIdUnwrap {
+    last: Option<u64>,
+    wraps: u64,
+}
+
+impl FrameIdUnwrap {
+    /// The counter value of the frame with id `raw`.
+    pub fn unwrap(&mut self, raw: u64) -> u64 {
+        const HALF: u64 = 0x8000;
+        let Some(last) = self.last.filter(|&l| l <= 0xFFFF && raw <= 0xFFFF) else {
+            self.last = Some(raw);
+            return self.wraps * 0xFFFF + raw;
+        };
+        if raw < last && last - raw > HALF {
+            self.wraps += 1;
+        } else if raw > last && raw - last > HALF {
+            // A late frame from before the last wrap.
+            return self.wraps.saturating_sub(1) * 0xFFFF + raw;
+        } else if raw < last {
+            return self.wraps * 0xFFFF + raw;
+        }
+        self.last = Some(raw);
+        self.wraps * 0xFFFF + raw
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -280,5 +312,27 @@ mod tests {
             }
         )
         .is_err());
+    }
+
+    #[test]
+    fn gvsp_frame_ids_unwrap_across_the_skipped_zero() {
+        let mut u = FrameIdUnwrap::default();
+        // The fake camera starts near the top of the 16-bit range.
+        let ids = [65533, 65534, 65535, 1, 2, 3];
+        let seq: Vec<u64> = ids.iter().map(|&r| u.unwrap(r)).collect();
+        assert_eq!(seq, [65533, 65534, 65535, 65536, 65537, 65538]);
+        // A late frame (id 2 again, or one from before the wrap) is older.
+        assert_eq!(u.unwrap(2), 65537);
+        assert_eq!(u.unwrap(65534), 65534);
+        assert_eq!(u.unwrap(4), 65539);
+        // A reordered pair far from any wrap.
+        let mut u = FrameIdUnwrap::default();
+        assert_eq!(
+            [u.unwrap(100), u.unwrap(102), u.unwrap(101), u.unwrap(103)],
+            [100, 102, 101, 103]
+        );
+        // 64-bit ids pass through.
+        let mut u = FrameIdUnwrap::default();
+        assert_eq!([u.unwrap(70_000), u.unwrap(70_001)], [70_000, 70_001]);
     }
 }

@@ -4,8 +4,9 @@
 //! and the sequencer picks frames by timestamp.
 //!
 //! Timestamps: the driver's `CLOCK_MONOTONIC` buffer time (start or end of
-//! frame, depending on the driver) minus the exposure time, mapped to
-//! [`Instant`]: never later than the true start of the exposure.
+//! frame, depending on the driver) minus the exposure time and one frame
+//! interval (readout), mapped to [`Instant`]: not later than the true start
+//! of the exposure for a camera that keeps up with its frame rate.
 //!
 //! Conversions and control mappings live in [`super::convert`] and are
 //! tested without this feature. No V4L2 device exists on the machines the
@@ -16,7 +17,7 @@ use std::time::{Duration, Instant};
 use v4l::buffer::Type;
 use v4l::control::{Control, Value};
 use v4l::io::mmap::Stream;
-use v4l::io::traits::CaptureStream;
+use v4l::io::traits::{CaptureStream, Stream as StreamTrait};
 use v4l::video::Capture;
 use v4l::{Device, Format, FourCC};
 
@@ -36,6 +37,8 @@ pub struct V4lCamera {
     stream: Option<Stream<'static>>,
     format: Format,
     model: String,
+    /// Exposure time plus one frame interval, subtracted from the driver's
+    /// timestamps.
     exposure: Duration,
     buffers: u32,
     scratch: Vec<u16>,
@@ -183,6 +186,7 @@ impl Camera for V4lCamera {
                 "V4L2 has no software trigger; use free running",
             ));
         }
+        self.exposure = Duration::ZERO;
         if let Some(r) = config.region {
             if (r.x, r.y) != (0, 0) {
                 return Err(unsupported(
@@ -212,6 +216,12 @@ impl Camera for V4lCamera {
             self.set("gain_db", CID_GAIN, value)?;
         }
         self.buffers = config.buffers.clamp(2, 32) as u32;
+        if let Ok(p) = self.device.params() {
+            let (num, den) = (p.interval.numerator, p.interval.denominator);
+            if den > 0 {
+                self.exposure += Duration::from_secs_f64(f64::from(num) / f64::from(den));
+            }
+        }
         Ok(())
     }
 
@@ -223,9 +233,21 @@ impl Camera for V4lCamera {
     }
 
     fn stop(&mut self) -> Result<(), CameraError> {
-        // Dropping the stream turns streaming off and unmaps the buffers.
-        self.stream = None;
-        Ok(())
+        let Some(mut stream) = self.stream.take() else {
+            return Ok(());
+        };
+        let stopped =
+            StreamTrait::stop(&mut stream).map_err(|e| io_err(&self.path, "stream off", &e));
+        // v4l's `Drop` for a stream panics when turning streaming off fails
+        // (other than for an unplugged device): keep that out of our drop.
+        let dropped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| drop(stream)));
+        if dropped.is_err() {
+            eprintln!(
+                "warning: {}: releasing the capture buffers failed",
+                self.path
+            );
+        }
+        stopped
     }
 
     fn next_frame(&mut self, timeout: Duration) -> Result<Frame, CameraError> {
@@ -270,5 +292,13 @@ impl Camera for V4lCamera {
             sequence,
             exposed_pattern: None,
         })
+    }
+}
+
+impl Drop for V4lCamera {
+    fn drop(&mut self) {
+        if let Err(e) = self.stop() {
+            eprintln!("warning: stopping the camera stream: {e}");
+        }
     }
 }

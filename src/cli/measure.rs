@@ -364,6 +364,14 @@ fn summarise(report: &Report, camera: &dyn Camera, recorder: &Recorder) {
         c.backpressure_waits,
         c.backpressure_s
     );
+    if let (Some((lo, hi)), Some(mean)) = (c.margin_s, c.mean_margin_s()) {
+        println!(
+            "  exposures started {:.2} to {:.2} ms (mean {:.2} ms) after the settle point",
+            lo * 1e3,
+            hi * 1e3,
+            mean * 1e3
+        );
+    }
     if let Some(s) = camera.stream_statistics() {
         println!(
             "  stream: {} buffers completed, {} failed, {} underruns, \

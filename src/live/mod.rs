@@ -160,9 +160,28 @@ pub struct Counters {
     pub backpressure_s: f64,
     /// Seconds since the first pattern was shown.
     pub elapsed_s: f64,
+    /// Smallest and largest time from the settle point to the start of an
+    /// accepted frame's exposure, s (the association margin; ≥ 0 by
+    /// construction, the spread shows how long the loop waits for a frame).
+    pub margin_s: Option<(f64, f64)>,
+    /// Sum of those margins, s (for the mean).
+    pub margin_sum_s: f64,
 }
 
 impl Counters {
+    /// Mean time from the settle point to the exposure start, s.
+    pub fn mean_margin_s(&self) -> Option<f64> {
+        (self.captured > 0).then(|| self.margin_sum_s / self.captured as f64)
+    }
+
+    fn note_margin(&mut self, margin_s: f64) {
+        self.margin_sum_s += margin_s;
+        self.margin_s = Some(match self.margin_s {
+            None => (margin_s, margin_s),
+            Some((lo, hi)) => (lo.min(margin_s), hi.max(margin_s)),
+        });
+    }
+
     /// Accepted frames per second of wall time.
     pub fn frames_per_s(&self) -> f64 {
         if self.elapsed_s > 0.0 {

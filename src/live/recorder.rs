@@ -80,12 +80,7 @@ impl Recorder {
             std::fs::remove_dir_all(&frames).map_err(io(&frames))?;
         }
         std::fs::create_dir_all(&frames).map_err(io(&frames))?;
-        station
-            .save(&dir.join(STATION_FILE))
-            .map_err(|e| AcquisitionError::Io {
-                path: dir.join(STATION_FILE),
-                source: std::io::Error::other(e.to_string()),
-            })?;
+        replace(&dir.join(STATION_FILE), &station.to_toml_string())?;
         let header = format!(
             "# written by mfd {} (mfd measure), frames appended as they are recorded\n\
              format = \"{ACQUISITION_FORMAT}\"\nstation = \"{STATION_FILE}\"\n",

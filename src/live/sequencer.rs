@@ -192,7 +192,11 @@ impl<'a> Shooter<'a> {
             std::thread::sleep(shown.settled.saturating_duration_since(Instant::now()));
             match self.shoot(&shown) {
                 Ok(frame) => match self.verify(&shown, &frame)? {
-                    None => return Ok(frame),
+                    None => {
+                        let margin = frame.timestamp.duration_since(shown.settled);
+                        self.counters.note_margin(margin.as_secs_f64());
+                        return Ok(frame);
+                    }
                     Some(problem) => {
                         self.counters.mismatches += 1;
                         last = problem;
