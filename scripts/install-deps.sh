@@ -10,6 +10,8 @@ packages=(build-essential pkg-config)
 # winit loads, screenshots for the window test (xwd, ImageMagick's convert).
 packages+=(mesa-vulkan-drivers xvfb libxkbcommon-x11-0 libx11-xcb1 libxcursor1 libxi6 libxrandr2
   imagemagick x11-apps)
+# Live acquisition: libaravis 0.8 (feature aravis), libclang for v4l's bindgen (feature v4l).
+packages+=(libaravis-dev libusb-1.0-0-dev libclang-dev)
 
 missing=()
 for p in "${packages[@]}"; do

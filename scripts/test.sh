@@ -21,10 +21,10 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy -D warnings"
 cargo clippy --all-targets --locked -- -D warnings
-echo "== cargo clippy --features display -D warnings"
-cargo clippy --all-targets --features display --locked -- -D warnings
+echo "== cargo clippy -D warnings (display, aravis, v4l)"
+cargo clippy --all-targets --locked --features display,aravis,v4l -- -D warnings
 echo "== cargo test"
 cargo test --all-targets --locked
-echo "== cargo test --features display (fullscreen window under Xvfb)"
-cargo test --features display --locked --lib --test display_xvfb --test display_offscreen
 cargo test --doc --locked
+echo "== cargo test, hardware features: the window under Xvfb, Aravis's fake GigE Vision camera on loopback"
+cargo test --locked --features display,aravis,v4l --lib --test display_xvfb --test display_offscreen --test aravis_fake

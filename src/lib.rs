@@ -9,9 +9,11 @@
 #![warn(missing_docs)]
 
 pub mod acquisition;
+pub mod camera;
 pub mod conventions;
 pub mod display;
 pub mod image_io;
+pub mod live;
 pub mod npy;
 pub mod optics;
 pub mod patterns;

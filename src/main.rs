@@ -28,6 +28,8 @@ enum Command {
     Station(cli::station::StationArgs),
     /// Reconstruct from an acquisition: screen points S1, S2 with uncertainty and quality maps.
     Reconstruct(cli::reconstruct::ReconstructArgs),
+    /// Measure live: show the schedule, record frames as they come, reconstruct.
+    Measure(cli::measure::MeasureArgs),
     /// Compare screen coordinates with a truth: found fraction, RMS error, calibration of σ.
     Compare(cli::compare::CompareArgs),
     /// Benchmarks: print figures as one JSON line.
@@ -49,6 +51,7 @@ fn main() -> std::process::ExitCode {
         Command::Compare(args) => cli::compare::run(&args),
         Command::Tradeoff(args) => cli::tradeoff::run(&args),
         Command::Display(args) => cli::display::run(&args),
+        Command::Measure(args) => cli::measure::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -6,6 +6,7 @@ pub mod bench_surfaces;
 pub mod bench_table;
 pub mod compare;
 pub mod display;
+pub mod measure;
 pub mod pictures;
 pub mod reconstruct;
 pub mod simulate;

@@ -111,24 +111,39 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let read_s = t0.elapsed().as_secs_f64();
+    let surfaces = (!args.surfaces.no_surfaces).then_some(&surface_opts);
+    solve_and_write(
+        &solver,
+        &station,
+        &args.out,
+        t0.elapsed().as_secs_f64(),
+        surfaces,
+    )
+}
+
+/// The stages after the frames are in: the spectral solve, its maps, and
+/// (with `surfaces`) the surface stage, all written into `out`; prints the
+/// summaries (`read_s`: seconds spent getting the frames). `mfd measure`
+/// calls this with its streamed solver.
+pub fn solve_and_write(
+    solver: &SpectralSolver,
+    station: &Station,
+    out: &std::path::Path,
+    read_s: f64,
+    surfaces: Option<&mfd::surfaces::SurfaceOptions>,
+) -> anyhow::Result<()> {
     let t1 = Instant::now();
     let maps = solver.solve()?;
     let solve_s = t1.elapsed().as_secs_f64();
-    maps.write(&args.out)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    maps.write(out)?;
     summarise(&maps, solver.candidate_pixels(), read_s, solve_s);
-    println!("wrote {}", args.out.join("screen_coords.npy").display());
-    if !args.surfaces.no_surfaces {
+    println!("wrote {}", out.join("screen_coords.npy").display());
+    if let Some(opts) = surfaces {
         let cov = maps.screen_cov();
-        let unc = mfd::surfaces::Uncertainty::Cov(&cov);
-        super::surfaces_stage::run(
-            &station,
-            &maps.screen_coords(),
-            unc,
-            &surface_opts,
-            &args.out,
-        )?;
-        println!("wrote {}", args.out.join("surfaces.json").display());
+        let unc = Uncertainty::Cov(&cov);
+        super::surfaces_stage::run(station, &maps.screen_coords(), unc, opts, out)?;
+        println!("wrote {}", out.join("surfaces.json").display());
     }
     Ok(())
 }

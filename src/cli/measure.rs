@@ -1,0 +1,426 @@
+//! `mfd measure`: live acquisition of a whole schedule, recorded as it
+//! arrives and reconstructed at the end with the same stages as
+//! `mfd reconstruct`.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use mfd::acquisition::{Acquisition, FrameInfo};
+use mfd::camera::{
+    self, Camera, CameraConfig, CameraSpec, PixelFormat, ScreenState, SimFaults, SimulatedCamera,
+    TriggerMode,
+};
+use mfd::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
+use mfd::live::{
+    acquire, Counters, FrameSink, MirroredDisplay, Recorder, Report, SequencerConfig, Session,
+    SolverSink,
+};
+use mfd::patterns::Pattern;
+use mfd::sim::{SimCamera, SimParams};
+use mfd::spectral::{SpectralConfig, SpectralSolver};
+use mfd::station::Station;
+use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+
+use super::simulate::ScheduleArgs;
+
+/// Arguments of `mfd measure`.
+#[derive(Args)]
+pub struct MeasureArgs {
+    /// Station geometry (mfd-station/1).
+    #[arg(long)]
+    station: PathBuf,
+    /// Camera: `sim`, `aravis` (first found), `aravis:ID`, `aravis:fake`
+    /// (the simulated station behind a GigE Vision fake camera on loopback),
+    /// `v4l:/dev/videoN`.
+    #[arg(long, default_value = "sim")]
+    camera: String,
+    /// Display: a monitor name, or `offscreen`.
+    #[arg(long, default_value = "offscreen")]
+    display: String,
+    /// Output folder: acquisition/ (mfd-acquisition/1) and result/.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    schedule: ScheduleArgs,
+    /// Simulated cameras: the element's true surfaces (mfd-surfaces/1); flat when omitted.
+    #[arg(long)]
+    sim_surfaces: Option<PathBuf>,
+    /// Simulated cameras: read noise, standard deviation as a fraction of full scale.
+    #[arg(long, default_value_t = 0.0)]
+    noise: f64,
+    /// Simulated cameras: bits per sample (8, 12 or 16).
+    #[arg(long, default_value_t = 16)]
+    bit_depth: u32,
+    /// Time the display needs after presenting a pattern before it is
+    /// settled, ms (LCD response; real monitors take their profile's value).
+    #[arg(long, default_value_t = 2.0)]
+    settle_ms: f64,
+    /// Display gamma for the offscreen renderer's levels (level =
+    /// 255·g^(1/γ); the display profiles in hw/ carry it).
+    #[arg(long, default_value_t = 2.2)]
+    gamma: f64,
+    /// Exposure time, µs (real cameras; the device's value when omitted).
+    #[arg(long)]
+    exposure_us: Option<f64>,
+    /// Gain, dB (real cameras).
+    #[arg(long)]
+    gain_db: Option<f64>,
+    /// Frame rate of a free-running camera, frames/s.
+    #[arg(long)]
+    frame_rate: Option<f64>,
+    /// Longest wait for a frame after the settle point, ms.
+    #[arg(long, default_value_t = 2000)]
+    frame_timeout_ms: u64,
+    /// Re-shoots allowed per pattern before giving up.
+    #[arg(long, default_value_t = 5)]
+    max_reshoots: u32,
+    /// Frames each consumer's ring buffer holds.
+    #[arg(long, default_value_t = 16)]
+    ring: usize,
+    #[command(flatten)]
+    faults: FaultArgs,
+    /// Continue an interrupted acquisition in --out/acquisition.
+    #[arg(long, conflicts_with = "overwrite")]
+    resume: bool,
+    /// Replace an existing acquisition in --out.
+    #[arg(long)]
+    overwrite: bool,
+    /// Record only; skip the reconstruction.
+    #[arg(long)]
+    no_reconstruct: bool,
+    #[command(flatten)]
+    surfaces: super::surfaces_stage::SurfaceArgs,
+}
+
+/// Faults the simulated camera injects (for testing the live loop).
+#[derive(Args)]
+struct FaultArgs {
+    /// Lose every k-th exposure.
+    #[arg(long, value_name = "K")]
+    sim_drop_every: Option<u64>,
+    /// Lose each exposure with this probability.
+    #[arg(long, default_value_t = 0.0)]
+    sim_drop_probability: f64,
+    /// Expose every k-th triggered frame just before the screen settled.
+    #[arg(long, value_name = "K")]
+    sim_early_every: Option<u64>,
+    /// Disconnect after this many frames.
+    #[arg(long, value_name = "N")]
+    sim_disconnect_after: Option<u64>,
+    /// Delay from exposure to delivery, ms.
+    #[arg(long, default_value_t = 0.0)]
+    sim_latency_ms: f64,
+    /// Seed of the random drops.
+    #[arg(long, default_value_t = 1)]
+    sim_seed: u64,
+}
+
+/// Runs `mfd measure`.
+pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
+    let station = Station::load(&args.station)?;
+    let schedule = args.schedule.schedule();
+    schedule.validate()?;
+    let patterns = schedule.patterns();
+    let spec: CameraSpec = args.camera.parse()?;
+    let screen = ScreenState::new();
+    let sim = if spec.is_simulated() {
+        Some(simulated_camera(args, &station, screen.clone())?)
+    } else {
+        None
+    };
+    let mut camera = camera::open(&spec, sim)?;
+    let mut display = open_display(&args.display, &station, args.settle_ms, args.gamma)?;
+    if spec.is_simulated() {
+        display = Box::new(MirroredDisplay::new(display, screen));
+    }
+    let trigger = configure(camera.as_mut(), args, &station)?;
+    let dir = args.out.join("acquisition");
+    let mut recorder = if args.resume {
+        Recorder::resume(&dir, &patterns)?
+    } else {
+        Recorder::create(&dir, &station, &patterns, args.overwrite)?
+    };
+    let mut solver = (!args.no_reconstruct)
+        .then(|| start_solver(&station, &patterns, &dir, recorder.recorded()))
+        .transpose()?;
+    let first = recorder.recorded();
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("installing the Ctrl-C handler")?;
+    camera.start()?;
+    let session = Session {
+        camera: camera.as_mut(),
+        display: display.as_mut(),
+        patterns: &patterns,
+        first,
+        trigger,
+        resolution: (station.camera.width, station.camera.height),
+        config: SequencerConfig {
+            frame_timeout: Duration::from_millis(args.frame_timeout_ms),
+            max_reshoots: args.max_reshoots,
+            capacity: args.ring,
+        },
+        stop: &stop,
+    };
+    let t0 = Instant::now();
+    let result = run_session(session, &mut recorder, solver.as_mut());
+    if let Err(e) = camera.stop() {
+        eprintln!("warning: stopping the camera: {e}");
+    }
+    let report = result.with_context(|| kept(&recorder, patterns.len()))?;
+    summarise(&report, camera.as_ref(), &recorder);
+    finish(args, &report, solver.as_ref(), t0.elapsed().as_secs_f64())
+}
+
+/// The one place that builds the display `--display` names: `offscreen` is
+/// the wgpu renderer of the fringe shader (lavapipe where there is no GPU);
+/// a monitor needs the window backend, which `mfd measure` does not drive
+/// yet (its event loop must own the main thread): `mfd display --pattern`
+/// shows patterns on a monitor for alignment.
+fn open_display(
+    name: &str,
+    station: &Station,
+    settle_ms: f64,
+    gamma: f64,
+) -> anyhow::Result<Box<dyn PatternDisplay>> {
+    anyhow::ensure!(
+        settle_ms.is_finite() && (0.0..=10_000.0).contains(&settle_ms),
+        "--settle-ms: expected 0 to 10000 ms, found {settle_ms}"
+    );
+    let settle = Duration::from_secs_f64(settle_ms * 1e-3);
+    match name {
+        "offscreen" => {
+            let shading = Shading::new(gamma, Dither::Bayer8)?;
+            let (w, h) = (station.screen.width, station.screen.height);
+            Ok(Box::new(OffscreenDisplay::new(w, h, shading, settle)?))
+        }
+        monitor if cfg!(feature = "display") => anyhow::bail!(
+            "--display {monitor}: mfd measure drives only the offscreen display so far; \
+             show patterns on a monitor with `mfd display --pattern`"
+        ),
+        monitor => Err(DisplayError::NotBuilt {
+            backend: monitor.into(),
+            feature: "display",
+        }
+        .into()),
+    }
+}
+
+fn simulated_camera(
+    args: &MeasureArgs,
+    station: &Station,
+    screen: ScreenState,
+) -> anyhow::Result<SimulatedCamera> {
+    let (front, back) = super::load_surfaces(args.sim_surfaces.as_deref(), station)?;
+    let plate = Plate::new(station, front, back, DEFAULT_EDGE_MARGIN_MM);
+    let view = TracedView::trace(station, &plate);
+    let params = SimParams {
+        bit_depth: args.bit_depth,
+        noise_frac: args.noise,
+        ..SimParams::default()
+    };
+    let renderer = SimCamera::new(&view, &station.screen, params)?;
+    let f = &args.faults;
+    anyhow::ensure!(
+        f.sim_latency_ms.is_finite() && f.sim_latency_ms >= 0.0,
+        "--sim-latency-ms: expected ≥ 0"
+    );
+    anyhow::ensure!(
+        (0.0..1.0).contains(&f.sim_drop_probability),
+        "--sim-drop-probability: expected a probability in [0, 1)"
+    );
+    let faults = SimFaults {
+        latency: Duration::from_secs_f64(f.sim_latency_ms * 1e-3),
+        drop_every: f.sim_drop_every.filter(|&k| k > 0),
+        drop_probability: f.sim_drop_probability,
+        seed: f.sim_seed,
+        early_every: f.sim_early_every.filter(|&k| k > 0),
+        disconnect_after: f.sim_disconnect_after,
+    };
+    Ok(SimulatedCamera::new(renderer, screen, faults))
+}
+
+/// Configures the camera; returns the trigger mode in use.
+fn configure(
+    camera: &mut dyn Camera,
+    args: &MeasureArgs,
+    station: &Station,
+) -> anyhow::Result<TriggerMode> {
+    let info = camera.describe();
+    let trigger = if info.software_trigger {
+        TriggerMode::Software
+    } else {
+        TriggerMode::FreeRunning
+    };
+    let sim = info.backend == "sim" || args.camera == "aravis:fake";
+    let config = CameraConfig {
+        exposure_us: args.exposure_us,
+        gain_db: args.gain_db,
+        pixel_format: sim
+            .then(|| PixelFormat::from_bit_depth(args.bit_depth))
+            .flatten(),
+        trigger,
+        frame_rate_hz: args.frame_rate,
+        ..CameraConfig::default()
+    };
+    camera.configure(&config)?;
+    let res = camera.describe().resolution;
+    let want = (station.camera.width, station.camera.height);
+    anyhow::ensure!(
+        res == want,
+        "camera {} delivers {}x{} frames, the station says {}x{} ({})",
+        info.id,
+        res.0,
+        res.1,
+        want.0,
+        want.1,
+        "fix the station's [camera] resolution or the camera's region"
+    );
+    Ok(trigger)
+}
+
+/// The spectral solver for the whole schedule, fed with the frames a
+/// resumed acquisition already holds.
+fn start_solver(
+    station: &Station,
+    patterns: &[Pattern],
+    dir: &Path,
+    recorded: usize,
+) -> anyhow::Result<SpectralSolver> {
+    let frames = FrameInfo::from_patterns(patterns);
+    let mut solver = SpectralSolver::new(station, &frames, SpectralConfig::default())?;
+    if recorded > 0 {
+        let acq = Acquisition::open(dir)?;
+        let mut frame = Vec::new();
+        for index in 0..recorded {
+            acq.read_frame(index, &mut frame)?;
+            solver.push_frame(index, &frame)?;
+        }
+    }
+    Ok(solver)
+}
+
+fn run_session(
+    session: Session<'_>,
+    recorder: &mut Recorder,
+    solver: Option<&mut SpectralSolver>,
+) -> anyhow::Result<Report> {
+    let total = session.patterns.len() as u64;
+    let bar = ProgressBar::new(total).with_style(
+        ProgressStyle::with_template(
+            "[{bar:30}] {pos}/{len} frames, {msg}, {elapsed} elapsed, eta {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_position(session.first as u64);
+    let mut progress = |c: &Counters| {
+        bar.set_position((c.first + c.captured) as u64);
+        bar.set_message(format!(
+            "{:.1} frames/s, {} dropped, {} re-shot, {} waits on consumers",
+            c.frames_per_s(),
+            c.timeouts + c.incomplete,
+            c.reshoots,
+            c.backpressure_waits
+        ));
+    };
+    let mut solver_sink = solver.map(|solver| SolverSink { solver });
+    let mut sinks: Vec<&mut dyn FrameSink> = vec![recorder];
+    if let Some(s) = solver_sink.as_mut() {
+        sinks.push(s);
+    }
+    let report = acquire(session, &mut sinks, &mut progress);
+    bar.finish_and_clear();
+    Ok(report?)
+}
+
+/// What is on disk after a failure, for the error message.
+fn kept(recorder: &Recorder, total: usize) -> String {
+    format!(
+        "{} of {total} frames are recorded in {} (continue with --resume)",
+        recorder.recorded(),
+        recorder.dir().display()
+    )
+}
+
+fn summarise(report: &Report, camera: &dyn Camera, recorder: &Recorder) {
+    let c = &report.counters;
+    println!(
+        "{} {} frames in {:.1} s ({:.1} frames/s); {} of {} recorded in {}",
+        if report.interrupted {
+            "stopped after"
+        } else {
+            "captured"
+        },
+        c.captured,
+        c.elapsed_s,
+        c.frames_per_s(),
+        recorder.recorded(),
+        c.total,
+        recorder.dir().display()
+    );
+    println!(
+        "  re-shoots {} (timeouts {}, mismatched frames {}, incomplete {}); \
+         lost frames {}; stale frames skipped {}; waits on consumers {} ({:.2} s)",
+        c.reshoots,
+        c.timeouts,
+        c.mismatches,
+        c.incomplete,
+        c.lost_frames,
+        c.stale,
+        c.backpressure_waits,
+        c.backpressure_s
+    );
+    if let (Some((lo, hi)), Some(mean)) = (c.margin_s, c.mean_margin_s()) {
+        println!(
+            "  exposures started {:.2} to {:.2} ms (mean {:.2} ms) after the settle point",
+            lo * 1e3,
+            hi * 1e3,
+            mean * 1e3
+        );
+    }
+    if let Some(s) = camera.stream_statistics() {
+        println!(
+            "  stream: {} buffers completed, {} failed, {} underruns, \
+             {} packets resent, {} missing",
+            s.completed, s.failures, s.underruns, s.resent_packets, s.missing_packets
+        );
+    }
+}
+
+fn finish(
+    args: &MeasureArgs,
+    report: &Report,
+    solver: Option<&SpectralSolver>,
+    acquire_s: f64,
+) -> anyhow::Result<()> {
+    if report.interrupted {
+        println!(
+            "interrupted: continue with `mfd measure ... --resume`, or reconstruct \
+             what is there with `mfd reconstruct {}`",
+            args.out.join("acquisition").display()
+        );
+        return Ok(());
+    }
+    match solver {
+        Some(solver) => {
+            let station = Station::load(&args.station)?;
+            let opts = args.surfaces.options(mfd::trace::DEFAULT_EDGE_MARGIN_MM)?;
+            let surfaces = (!args.surfaces.no_surfaces).then_some(&opts);
+            super::reconstruct::solve_and_write(
+                solver,
+                &station,
+                &args.out.join("result"),
+                acquire_s,
+                surfaces,
+            )
+        }
+        None => Ok(()),
+    }
+}

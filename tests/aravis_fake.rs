@@ -1,0 +1,174 @@
+//! The live loop over the real GigE Vision protocol: libaravis's fake
+//! camera on loopback serves the simulated station's frames, the Aravis
+//! backend receives them, and every recorded frame must equal the
+//! simulator's rendering of its pattern. Only one fake camera can bind
+//! 127.0.0.1:3956 at a time, so the tests take turns.
+#![cfg(feature = "aravis")]
+
+mod common;
+
+use std::sync::atomic::AtomicBool;
+use std::sync::Mutex;
+use std::time::Duration;
+
+use mfd::acquisition::Acquisition;
+use mfd::camera::aravis_fake::FakeStation;
+use mfd::camera::{
+    Camera, CameraConfig, ScreenState, SimFaults, SimulatedCamera, StreamStatistics, TriggerMode,
+};
+use mfd::live::{
+    acquire, Counters, FrameSink, MirroredDisplay, Recorder, SequencerConfig, Session, SimDisplay,
+};
+use mfd::patterns::Schedule;
+use mfd::sim::{SimCamera, SimParams};
+use mfd::station::Station;
+use mfd::trace::{Plate, TracedView};
+use mfd::zernike::ZernikeSurface;
+
+static LOOPBACK: Mutex<()> = Mutex::new(());
+
+fn flat_view(station: &Station) -> TracedView {
+    let flat = ZernikeSurface::flat(station.element.aperture_radius_mm, [0.0, 0.0]).unwrap();
+    TracedView::trace(station, &Plate::new(station, flat.clone(), flat, 3.0))
+}
+
+/// Runs 30 patterns of the fixture station through the fake camera with
+/// `loss` of its GVSP packets lost; checks every recorded frame bit-exactly
+/// against the simulator and returns the counters and stream figures.
+fn run_fake(loss: f64) -> (Counters, StreamStatistics) {
+    let station = Station::load(&common::public_small().join("station.toml")).unwrap();
+    let view = flat_view(&station);
+    let params = SimParams {
+        bit_depth: 12,
+        ..SimParams::default()
+    };
+    let renderer = || SimCamera::new(&view, &station.screen, params.clone()).unwrap();
+    let screen = ScreenState::new();
+    let sim = SimulatedCamera::new(renderer(), screen.clone(), SimFaults::default());
+    let mut camera = FakeStation::start(sim).unwrap();
+    camera.set_packet_loss(loss);
+    assert!(!camera.describe().software_trigger);
+    let config = CameraConfig {
+        trigger: TriggerMode::FreeRunning,
+        frame_rate_hz: Some(100.0),
+        exposure_us: Some(500.0),
+        ..CameraConfig::default()
+    };
+    camera.configure(&config).unwrap();
+    assert_eq!(camera.describe().resolution, (48, 48));
+    camera.start().unwrap();
+
+    let patterns = Schedule {
+        tau_start: 1.0,
+        tau_stop: 15.0,
+        tau_step: 1.0,
+        ..Schedule::default()
+    }
+    .patterns();
+    let dir = tempfile::tempdir().unwrap();
+    let mut recorder = Recorder::create(dir.path(), &station, &patterns, false).unwrap();
+    let res = (station.screen.width, station.screen.height);
+    let mut display = MirroredDisplay::new(
+        Box::new(SimDisplay::new(res, Duration::from_millis(2))),
+        screen,
+    );
+    let stop = AtomicBool::new(false);
+    let session = Session {
+        camera: &mut camera,
+        display: &mut display,
+        patterns: &patterns,
+        first: 0,
+        trigger: TriggerMode::FreeRunning,
+        resolution: (48, 48),
+        config: SequencerConfig {
+            frame_timeout: Duration::from_secs(2),
+            ..SequencerConfig::default()
+        },
+        stop: &stop,
+    };
+    let mut sinks: Vec<&mut dyn FrameSink> = vec![&mut recorder];
+    let report = acquire(session, &mut sinks, &mut |_: &Counters| {}).unwrap();
+    camera.stop().unwrap();
+    // Read after stop: the figures of the stream that just ended.
+    let stats = camera.statistics();
+    eprintln!(
+        "aravis fake camera, packet loss {loss}: {:?}\nstream: {stats:?}",
+        report.counters
+    );
+
+    let acq = Acquisition::open(dir.path()).unwrap();
+    assert_eq!(acq.complete_frames(), 30);
+    let mut expected = vec![0u16; 48 * 48];
+    let mut got = Vec::new();
+    let mut r = renderer();
+    for (k, p) in patterns.iter().enumerate() {
+        r.render(p, k as u64, &mut expected);
+        acq.read_frame(k, &mut got).unwrap();
+        assert!(got == expected, "frame {k} differs from the simulator's");
+    }
+    (report.counters, stats)
+}
+
+#[test]
+fn fake_gige_camera_through_a_whole_acquisition() {
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    let (c, stats) = run_fake(0.0);
+    assert_eq!(c.captured, 30);
+    // The fill callback tags each frame with the pattern it saw: none of
+    // the frames picked by timestamp may carry another pattern.
+    assert_eq!(c.mismatches, 0, "{c:?}");
+    assert!(stats.completed >= 30, "{stats:?}");
+    assert_eq!((stats.failures, stats.missing_packets), (0, 0), "{stats:?}");
+}
+
+#[test]
+fn lost_packets_give_incomplete_frames_that_are_never_recorded() {
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    // 10 % of ~5 packets per frame over ≥ 30 frames: P(no loss) ≈ 1e-7.
+    let (c, stats) = run_fake(0.1);
+    assert_eq!((c.captured, c.mismatches), (30, 0), "{c:?}");
+    assert!(c.incomplete > 0 && stats.failures > 0, "{c:?} {stats:?}");
+}
+
+#[test]
+fn measure_over_the_fake_camera_reconstructs() {
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let st = common::public_small()
+        .join("station.toml")
+        .display()
+        .to_string();
+    let out = dir.path().display().to_string();
+    let run = common::mfd(&[
+        "measure",
+        "--station",
+        &st,
+        "--camera",
+        "aravis:fake",
+        "--out",
+        &out,
+        "--tau-start",
+        "2",
+        "--tau-stop",
+        "60",
+        "--tau-step",
+        "2",
+        "--frame-rate",
+        "100",
+        "--exposure-us",
+        "500",
+    ]);
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "{log}");
+    assert!(
+        log.contains("captured 60 frames") && log.contains("stream:"),
+        "{log}"
+    );
+    assert!(dir.path().join("result/screen_coords.npy").is_file());
+    let acq = Acquisition::open(&dir.path().join("acquisition")).unwrap();
+    assert_eq!(acq.complete_frames(), 60);
+}
