@@ -141,7 +141,7 @@ fn summary_json(
         "format": "mfd-summary/1",
         "pixels": {"s1": obs.count(0), "s2": obs.count(1)},
         "sigma_from_data": obs.sigma_known,
-        "outliers": {"rule": "pixel chi2 of its whitened residuals > 49 (P < 1e-9 for a correct pixel)",
+        "outliers": {"rule": "pixel chi2 of its whitened residuals > 49 x max(1, median chi2 per component / 0.75), at most 1 % of the pixels",
                      "count": sol.rejected.len(), "pixels_col_row": sol.rejected.iter().take(1000).collect::<Vec<_>>()},
         "figures_note": "RMS, PV and pictures with piston and tilt (Noll 1-3) removed; front piston fixed at 0 by the reference plane; back piston fixed at the nominal thickness",
         "front": front,
