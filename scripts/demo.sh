@@ -27,12 +27,21 @@ echo "== trace: the ideal screen points of the same scene"
 $mfd trace --station calib/paper-sim.toml --surfaces "$out/acquisition/truth/truth_surfaces.json" \
   --out "$out/trace"
 
-echo "== reconstruct: screen points S1, S2 from the frames (spectral stage; a few minutes on 2 cores)"
+echo "== reconstruct: screen points S1, S2 from the frames (spectral stage, a few minutes on 2 cores), then both surfaces"
 $mfd reconstruct "$out/acquisition" --out "$out/result"
 
 echo "== figures: the reconstruction against the simulation's truth"
 $mfd compare --screen-coords "$out/result/screen_coords.npy" \
   --truth "$out/acquisition/truth/truth_screen_coords.npy" --std "$out/result/screen_std.npy"
+$mfd compare --surfaces "$out/result/surfaces.json" \
+  --truth-surfaces "$out/acquisition/truth/truth_surfaces.json" --summary "$out/result/summary.json"
+
+echo "== surfaces from the ideal (traced) screen points: the surface solvers alone, exact"
+$mfd reconstruct --screen-coords "$out/trace/screen_coords.npy" --station calib/paper-sim.toml \
+  --out "$out/from-trace" --terms 36
+$mfd compare --surfaces "$out/from-trace/surfaces.json" \
+  --truth-surfaces "$out/acquisition/truth/truth_surfaces.json"
 du -sh "$out/acquisition" | awk '{print "   acquisition size: " $1}'
 echo "files: $out/acquisition (frames.npy, acquisition.toml, truth/), $out/trace (screen_coords.npy),"
-echo "       $out/result (screen_coords.npy, screen_std.npy, quality maps)"
+echo "       $out/result (screen_coords.npy, screen_std.npy, screen_cov.npy, quality maps, surfaces.json,"
+echo "       front.png, back.png, *_coefficients.png, *_height_nm.npy, summary.json), $out/from-trace"

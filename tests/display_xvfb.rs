@@ -281,3 +281,43 @@ fn a_missing_monitor_is_an_error_naming_it() {
         "{err}"
     );
 }
+
+/// A whole `mfd measure` with the schedule on the (virtual) monitor: the
+/// window's event loop owns the main thread, the sequencer runs on its
+/// worker; every pattern is recorded and the acquisition reads back.
+#[test]
+fn measure_shows_the_schedule_on_a_monitor() {
+    let xvfb = start_xvfb();
+    let runtime = runtime_dir();
+    let out_dir = tempfile::tempdir().unwrap();
+    let station = common::public_small().join("station.toml");
+    let out = mfd(
+        &xvfb.display,
+        runtime.path(),
+        &[
+            "measure",
+            "--station",
+            station.to_str().unwrap(),
+            "--camera",
+            "sim",
+            "--display",
+            "0",
+            "--tau-stop",
+            "4",
+            "--no-reconstruct",
+            "--out",
+            out_dir.path().to_str().unwrap(),
+        ],
+    )
+    .output()
+    .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "{text}");
+    // τ 0.2 … 4 step 0.2 on ±45°: 40 patterns.
+    let acq = mfd::acquisition::Acquisition::open(&out_dir.path().join("acquisition")).unwrap();
+    assert_eq!(acq.complete_frames(), 40, "{text}");
+}

@@ -75,7 +75,7 @@ impl Rig {
         cam
     }
 
-    fn display(&self, screen: &ScreenState) -> MirroredDisplay {
+    fn display(&self, screen: &ScreenState) -> MirroredDisplay<'static> {
         let res = (self.station.screen.width, self.station.screen.height);
         let inner = SimDisplay::new(res, Duration::from_millis(1));
         MirroredDisplay::new(Box::new(inner), screen.clone())

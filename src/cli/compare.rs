@@ -1,21 +1,34 @@
 //! `mfd compare`: screen coordinates against a truth, with figures.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::bail;
+use anyhow::{bail, Context};
 use clap::Args;
 
 use mfd::npy;
+use mfd::surfaces::report::rms_difference_nm;
+use mfd::surfaces_file::SurfacesFile;
 
 /// Arguments of `mfd compare`.
 #[derive(Args)]
 pub struct CompareArgs {
     /// Screen coordinates to judge ([rows, cols, 2, 2], e.g. a reconstruction's).
-    #[arg(long)]
-    screen_coords: PathBuf,
+    #[arg(long, requires = "truth", required_unless_present = "surfaces")]
+    screen_coords: Option<PathBuf>,
     /// The truth in the same layout (e.g. a simulation's truth/truth_screen_coords.npy).
+    #[arg(long, requires = "screen_coords")]
+    truth: Option<PathBuf>,
+    /// Surfaces to judge (surfaces.json): RMS difference from
+    /// --truth-surfaces over the aperture, piston and tilt removed.
+    #[arg(long, requires = "truth_surfaces")]
+    surfaces: Option<PathBuf>,
+    /// The true surfaces (e.g. a simulation's truth/truth_surfaces.json).
     #[arg(long)]
-    truth: PathBuf,
+    truth_surfaces: Option<PathBuf>,
+    /// The reconstruction's summary.json, to set the error against the
+    /// surface uncertainty it reported.
+    #[arg(long, requires = "surfaces")]
+    summary: Option<PathBuf>,
     /// The reported standard deviations ([rows, cols, 2, 2], screen_std.npy),
     /// to check that the errors match them.
     #[arg(long)]
@@ -24,13 +37,64 @@ pub struct CompareArgs {
 
 /// Runs `mfd compare`.
 pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
-    let (shape, ours) = npy::read_f64(&args.screen_coords)?;
-    let (tshape, truth) = npy::read_f64(&args.truth)?;
+    if let (Some(a), Some(b)) = (&args.screen_coords, &args.truth) {
+        compare_points(args, a, b)?;
+    }
+    if let (Some(a), Some(b)) = (&args.surfaces, &args.truth_surfaces) {
+        compare_surfaces(a, b, args.summary.as_deref())?;
+    }
+    Ok(())
+}
+
+fn compare_surfaces(ours: &Path, truth: &Path, summary: Option<&Path>) -> anyhow::Result<()> {
+    let (a, b) = (SurfacesFile::load(ours)?, SurfacesFile::load(truth)?);
+    let reported: Option<serde_json::Value> = match summary {
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            Some(
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{}: not JSON", p.display()))?,
+            )
+        }
+        None => None,
+    };
+    for (name, x, y) in [
+        ("front", a.front_coefficients(), b.front_coefficients()),
+        ("back", a.back_coefficients(), b.back_coefficients()),
+    ] {
+        let (Some(x), Some(y)) = (x, y) else {
+            println!("{name}: not reconstructed (null)");
+            continue;
+        };
+        let err = rms_difference_nm(x, y);
+        print!("{name} surface: RMS error {err:.4} nm over the aperture (piston and tilt removed), {} terms", x.len());
+        if let Some(u) = reported
+            .as_ref()
+            .and_then(|r| r[name]["error_rms_nm"].as_f64())
+        {
+            print!(
+                "; reported uncertainty {u:.4} nm (error/uncertainty {:.2})",
+                err / u
+            );
+        }
+        println!();
+    }
+    Ok(())
+}
+
+fn compare_points(
+    args: &CompareArgs,
+    screen_coords: &Path,
+    truth_path: &Path,
+) -> anyhow::Result<()> {
+    let (shape, ours) = npy::read_f64(screen_coords)?;
+    let (tshape, truth) = npy::read_f64(truth_path)?;
     if shape != tshape || shape.len() != 4 || shape[2..] != [2, 2] {
         bail!(
             "{} has shape {shape:?} and {} {tshape:?}: expected the same [rows, cols, 2, 2]",
-            args.screen_coords.display(),
-            args.truth.display()
+            screen_coords.display(),
+            truth_path.display()
         );
     }
     let std = match &args.std {

@@ -30,7 +30,7 @@ use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use super::simulate::ScheduleArgs;
 
 /// Arguments of `mfd measure`.
-#[derive(Args)]
+#[derive(Args, Clone)]
 pub struct MeasureArgs {
     /// Station geometry (mfd-station/1).
     #[arg(long)]
@@ -99,7 +99,7 @@ pub struct MeasureArgs {
 }
 
 /// Faults the simulated camera injects (for testing the live loop).
-#[derive(Args)]
+#[derive(Args, Clone)]
 struct FaultArgs {
     /// Lose every k-th exposure.
     #[arg(long, value_name = "K")]
@@ -121,8 +121,64 @@ struct FaultArgs {
     sim_seed: u64,
 }
 
-/// Runs `mfd measure`.
+/// Runs `mfd measure`: on a monitor (feature `display`) inside the
+/// fullscreen window's event loop, which must own the main thread, with the
+/// measurement on the window's worker thread; else on the offscreen display.
 pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
+    #[cfg(feature = "display")]
+    if args.display != "offscreen" {
+        return on_monitor(args);
+    }
+    let station = Station::load(&args.station)?;
+    let display = open_display(&args.display, &station, args.settle_ms, args.gamma)?;
+    run_with(args, display)
+}
+
+/// The measurement on monitor `--display N` (an index of `mfd display --list`).
+#[cfg(feature = "display")]
+fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
+    use mfd::display::window::{run_fullscreen, WindowConfig, WindowDisplay};
+    let station = Station::load(&args.station)?;
+    let monitor: usize = args.display.parse().with_context(|| {
+        format!(
+            "--display {}: expected `offscreen` or a monitor index from `mfd display --list`",
+            args.display
+        )
+    })?;
+    anyhow::ensure!(
+        args.settle_ms.is_finite() && (0.0..=10_000.0).contains(&args.settle_ms),
+        "--settle-ms: expected 0 to 10000 ms, found {}",
+        args.settle_ms
+    );
+    let config = WindowConfig {
+        monitor,
+        shading: Shading::new(args.gamma, Dither::Bayer8)?,
+        settle: Duration::from_secs_f64(args.settle_ms * 1e-3),
+        expect_resolution: Some((station.screen.width, station.screen.height)),
+    };
+    /// The window handle, borrowed for the measurement.
+    struct Borrowed<'a>(&'a mut WindowDisplay);
+    impl PatternDisplay for Borrowed<'_> {
+        fn resolution(&self) -> (u32, u32) {
+            self.0.resolution()
+        }
+        fn show(
+            &mut self,
+            index: usize,
+            pattern: &mfd::patterns::Pattern,
+        ) -> Result<mfd::display::Shown, DisplayError> {
+            self.0.show(index, pattern)
+        }
+    }
+    let args = args.clone();
+    run_fullscreen(config, move |window: &mut WindowDisplay| {
+        run_with(&args, Box::new(Borrowed(window))).map_err(|e| format!("{e:#}"))
+    })?
+    .map_err(anyhow::Error::msg)
+}
+
+fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow::Result<()> {
+    let mut display = display;
     let station = Station::load(&args.station)?;
     let schedule = args.schedule.schedule();
     schedule.validate()?;
@@ -135,7 +191,6 @@ pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
         None
     };
     let mut camera = camera::open(&spec, sim)?;
-    let mut display = open_display(&args.display, &station, args.settle_ms, args.gamma)?;
     if spec.is_simulated() {
         display = Box::new(MirroredDisplay::new(display, screen));
     }
@@ -179,11 +234,10 @@ pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
     finish(args, &report, solver.as_ref(), t0.elapsed().as_secs_f64())
 }
 
-/// The one place that builds the display `--display` names: `offscreen` is
+/// The display `--display` names when it is not a monitor: `offscreen` is
 /// the wgpu renderer of the fringe shader (lavapipe where there is no GPU);
-/// a monitor needs the window backend, which `mfd measure` does not drive
-/// yet (its event loop must own the main thread): `mfd display --pattern`
-/// shows patterns on a monitor for alignment.
+/// a monitor without feature `display` is an error naming the feature
+/// (with it, [`run`] opens the window instead).
 fn open_display(
     name: &str,
     station: &Station,
@@ -201,10 +255,6 @@ fn open_display(
             let (w, h) = (station.screen.width, station.screen.height);
             Ok(Box::new(OffscreenDisplay::new(w, h, shading, settle)?))
         }
-        monitor if cfg!(feature = "display") => anyhow::bail!(
-            "--display {monitor}: mfd measure drives only the offscreen display so far; \
-             show patterns on a monitor with `mfd display --pattern`"
-        ),
         monitor => Err(DisplayError::NotBuilt {
             backend: monitor.into(),
             feature: "display",

@@ -47,19 +47,19 @@ impl PatternDisplay for SimDisplay {
 }
 
 /// A display that also tells a [`ScreenState`] what it shows.
-pub struct MirroredDisplay {
-    inner: Box<dyn PatternDisplay>,
+pub struct MirroredDisplay<'a> {
+    inner: Box<dyn PatternDisplay + 'a>,
     screen: ScreenState,
 }
 
-impl MirroredDisplay {
+impl<'a> MirroredDisplay<'a> {
     /// Wraps `inner`, publishing to `screen`.
-    pub fn new(inner: Box<dyn PatternDisplay>, screen: ScreenState) -> Self {
+    pub fn new(inner: Box<dyn PatternDisplay + 'a>, screen: ScreenState) -> Self {
         MirroredDisplay { inner, screen }
     }
 }
 
-impl PatternDisplay for MirroredDisplay {
+impl PatternDisplay for MirroredDisplay<'_> {
     fn resolution(&self) -> (u32, u32) {
         self.inner.resolution()
     }
