@@ -60,38 +60,9 @@ fn run(station: &Station, terms: Option<usize>, seed: u64) -> (f64, f64) {
     (ef, eb)
 }
 
-/// The 48×48 bench station (`mfd bench thickness`) with another plate and tilt.
+/// The 48×48 bench station with another plate and tilt.
 fn tilted_station(thickness_mm: f64, index: f64, tilt_deg: f64) -> Station {
-    use mfd::station::{CameraProfile, DisplayProfile, Element, SymmetricLayout};
-    let camera = CameraProfile {
-        format: "mfd-camera-profile/1".into(),
-        model: "bench 48x48".into(),
-        resolution: [48, 48],
-        pixel_pitch_um: 10.0,
-        bit_depth: 16,
-    };
-    let display = DisplayProfile {
-        format: "mfd-display-profile/1".into(),
-        model: "paper LCD".into(),
-        resolution: [1600, 1200],
-        pixel_pitch_mm: 0.27,
-        diagonal_in: 21.3,
-        gamma: 2.2,
-        settle_ms: 30.0,
-    };
-    let layout = SymmetricLayout {
-        camera_height_mm: 825.0,
-        screen_height_mm: 825.0,
-        tilt_deg,
-        focal_length_mm: 6.0,
-        element: Element {
-            refractive_index: index,
-            thickness_mm,
-            aperture_radius_mm: 25.5,
-            aperture_center_mm: nalgebra::Point2::origin(),
-        },
-    };
-    layout.build(&camera, &display).unwrap()
+    mfd::station::bench_station(thickness_mm, index, tilt_deg).unwrap()
 }
 
 #[test]

@@ -81,8 +81,7 @@ pub fn run(args: &ExtremesArgs) -> anyhow::Result<()> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for c in &CASES {
-        let station =
-            super::bench_table::small_station_tilted(c.thickness_mm, c.index, c.tilt_deg)?;
+        let station = mfd::station::bench_station(c.thickness_mm, c.index, c.tilt_deg)?;
         let row = match one(&station, c, args) {
             Ok(r) => r,
             Err(e) => format!("| – | – | – | – | stopped: {} |", crate::error_chain(&e)),

@@ -2,14 +2,13 @@
 //! Cramér–Rao bound over plate thickness and refractive index.
 
 use clap::Args;
-use nalgebra::Point2;
 
 use mfd::acquisition::FrameInfo;
 use mfd::patterns::Schedule;
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
 use mfd::spectral::bound::two_reflection_bound;
 use mfd::spectral::{flags, SpectralConfig, SpectralSolver};
-use mfd::station::{CameraProfile, DisplayProfile, Element, Station, SymmetricLayout};
+use mfd::station::Station;
 use mfd::trace::{Plate, TracedView};
 
 /// Arguments of `mfd bench thickness`.
@@ -26,47 +25,9 @@ pub struct TableArgs {
     noise: f64,
 }
 
-/// A small camera (48×48 px of 10 µm, f = 6 mm) that sees the whole Ø 51 mm
-/// element from the paper's 825 mm: every pixel a sample of the aperture.
+/// The 48 × 48 bench station ([`mfd::station::bench_station`]) at 15°.
 pub fn small_station(thickness_mm: f64, index: f64) -> anyhow::Result<Station> {
-    small_station_tilted(thickness_mm, index, 15.0)
-}
-
-/// The same station with the camera (and screen) tilted by `tilt_deg`.
-pub fn small_station_tilted(
-    thickness_mm: f64,
-    index: f64,
-    tilt_deg: f64,
-) -> anyhow::Result<Station> {
-    let camera = CameraProfile {
-        format: "mfd-camera-profile/1".into(),
-        model: "bench 48x48".into(),
-        resolution: [48, 48],
-        pixel_pitch_um: 10.0,
-        bit_depth: 16,
-    };
-    let display = DisplayProfile {
-        format: "mfd-display-profile/1".into(),
-        model: "paper LCD".into(),
-        resolution: [1600, 1200],
-        pixel_pitch_mm: 0.27,
-        diagonal_in: 21.3,
-        gamma: 2.2,
-        settle_ms: 30.0,
-    };
-    let layout = SymmetricLayout {
-        camera_height_mm: 825.0,
-        screen_height_mm: 825.0,
-        tilt_deg,
-        focal_length_mm: 6.0,
-        element: Element {
-            refractive_index: index,
-            thickness_mm,
-            aperture_radius_mm: 25.5,
-            aperture_center_mm: Point2::origin(),
-        },
-    };
-    Ok(layout.build(&camera, &display)?)
+    Ok(mfd::station::bench_station(thickness_mm, index, 15.0)?)
 }
 
 /// Runs `mfd bench thickness`: prints a markdown table.

@@ -32,30 +32,8 @@ pub fn two_reflection_cov(
     kappa: f64,
     sigma: f64,
 ) -> Option<[[f64; 4]; 4]> {
-    let mut p = Params {
-        k: 2,
-        offset,
-        amp: [0.0; MAX_REFLECTIONS],
-        uv: [[0.0; 2]; MAX_REFLECTIONS],
-        kappa,
-    };
-    p.amp[..2].copy_from_slice(&amp);
-    p.uv[..2].copy_from_slice(&uv);
-    let index: Vec<u32> = (0..design.frames.len() as u32).collect();
-    let zeros = vec![0.0; index.len()];
-    let cov = normal_equations(design, &index, &zeros, &p)
-        .jtj
-        .try_inverse()?
-        * (sigma * sigma);
-    let idx = [
-        p.u_index(0),
-        p.u_index(0) + 1,
-        p.u_index(1),
-        p.u_index(1) + 1,
-    ];
-    Some(std::array::from_fn(|a| {
-        std::array::from_fn(|b| cov[(idx[a], idx[b])])
-    }))
+    let rows = reflections_cov(design, &uv, offset, &amp, kappa, sigma)?;
+    Some(std::array::from_fn(|a| rows[a]))
 }
 
 /// The bound's covariance of the reflections present, `(u, v)` per

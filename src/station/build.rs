@@ -111,6 +111,50 @@ pub struct SymmetricLayout {
     pub element: Element,
 }
 
+/// The 48 × 48 bench station: a small camera (10 µm pixels, f = 6 mm)
+/// that sees the whole Ø 51 mm element from the paper's 825 mm, so every
+/// pixel samples the aperture; the paper's 1600 × 1200 LCD; a plate of
+/// `thickness_mm` and `index`, camera and screen tilted by `tilt_deg`.
+/// What `mfd bench thickness|extremes`, `mfd tradeoff` and the tests run.
+///
+/// # Errors
+/// As [`SymmetricLayout::build`].
+pub fn bench_station(
+    thickness_mm: f64,
+    index: f64,
+    tilt_deg: f64,
+) -> Result<Station, StationError> {
+    let camera = CameraProfile {
+        format: "mfd-camera-profile/1".into(),
+        model: "bench 48x48".into(),
+        resolution: [48, 48],
+        pixel_pitch_um: 10.0,
+        bit_depth: 16,
+    };
+    let display = DisplayProfile {
+        format: "mfd-display-profile/1".into(),
+        model: "paper LCD".into(),
+        resolution: [1600, 1200],
+        pixel_pitch_mm: 0.27,
+        diagonal_in: 21.3,
+        gamma: 2.2,
+        settle_ms: 30.0,
+    };
+    let element = Element {
+        refractive_index: index,
+        thickness_mm,
+        ..SymmetricLayout::paper_element()
+    };
+    let layout = SymmetricLayout {
+        camera_height_mm: 825.0,
+        screen_height_mm: 825.0,
+        tilt_deg,
+        focal_length_mm: 6.0,
+        element,
+    };
+    layout.build(&camera, &display)
+}
+
 impl SymmetricLayout {
     /// The paper's simulated element: n = 1.5, 10 mm thick, Ø 51 mm.
     pub fn paper_element() -> Element {

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 
-pub use build::{CameraProfile, DisplayProfile, SymmetricLayout};
+pub use build::{bench_station, CameraProfile, DisplayProfile, SymmetricLayout};
 pub use file::{CameraFile, ElementFile, ScreenFile, StationFile, STATION_FORMAT};
 
 /// What went wrong reading or checking a station.
