@@ -156,12 +156,6 @@ pub fn levenberg_marquardt(
         let trial_plate = apply(plate, layout, &delta)?;
         let trial = accumulate(obs, station, &trial_plate, layout, true);
         report.iterations += 1;
-        if std::env::var_os("MFD_DEBUG_LM").is_some() {
-            eprintln!(
-                "{stage}: it {} chi2 {:.6e} -> {:.6e} step {largest:.3e} nm lambda {lambda:.1e} n {} -> {}",
-                report.iterations, cur.chi2, trial.chi2, cur.n_resid, trial.n_resid
-            );
-        }
         // A step that loses paths is not comparable by χ² alone: reject it.
         let comparable = trial.n_resid >= cur.n_resid;
         if comparable && trial.chi2 <= cur.chi2 {
