@@ -36,6 +36,59 @@ pub fn cos_cycles(x: f64) -> f64 {
     p
 }
 
+/// Taylor coefficients of cos(w) in w² through w^16, and of sin(w)/w in w²
+/// through w^16 (sin to w^17): on |w| ≤ π/4 the first omitted terms bound
+/// the error, (π/4)^18/18! = 2e-18 and (π/4)^19/19! = 8e-20.
+const COS_W: [f64; 9] = taylor(0);
+const SIN_W: [f64; 9] = taylor(1);
+
+const fn taylor(first: usize) -> [f64; 9] {
+    let mut c = [0.0; 9];
+    let mut term = 1.0;
+    let mut n = 1;
+    while n <= first {
+        term /= n as f64;
+        n += 1;
+    }
+    let mut k = 0;
+    while k < 9 {
+        c[k] = term;
+        // next: term · (−1) / ((n)(n+1)) for the power two higher
+        term = -term / ((n * (n + 1)) as f64);
+        n += 2;
+        k += 1;
+    }
+    c
+}
+
+/// `(cos 2πx, sin 2πx)` for `|x| < 2^50`, absolute error < 1e-15 plus the
+/// rounding of the reduced argument (~ulp(x) cycles): x is reduced to the
+/// nearest quarter cycle, |r| ≤ 1/8, and both series share it. Twice as
+/// fast as two [`cos_cycles`] and more accurate.
+#[inline(always)]
+pub fn sincos_cycles(x: f64) -> (f64, f64) {
+    let q = (4.0 * x + ROUND_MAGIC) - ROUND_MAGIC; // nearest quarter count
+    let w = std::f64::consts::TAU * (x - 0.25 * q); // |w| ≤ π/4
+    let w2 = w * w;
+    let mut c = COS_W[8];
+    let mut s = SIN_W[8];
+    let mut k = 8;
+    while k > 0 {
+        k -= 1;
+        c = c * w2 + COS_W[k];
+        s = s * w2 + SIN_W[k];
+    }
+    s *= w;
+    // 2πx = qπ/2 + w: rotate (cos w, sin w) by q quarter turns.
+    let qi = q as i64;
+    let (c, s) = if qi & 1 != 0 { (-s, c) } else { (c, s) };
+    if qi & 2 != 0 {
+        (-c, -s)
+    } else {
+        (c, s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -51,5 +104,29 @@ mod tests {
             worst = worst.max(err);
         }
         assert!(worst < 1e-10, "worst error {worst:e}");
+    }
+
+    #[test]
+    fn sincos_matches_std() {
+        // Bound: series 2e-18; the reduced argument carries the rounding of
+        // x (ulp(300) = 5.7e-14 cycles, 3.6e-13 rad) — and std's own
+        // reduction of 2πx the same — so 1e-12 over |x| ≤ 300, and 1e-15
+        // near zero where x is exact to 1e-17.
+        let mut worst: f64 = 0.0;
+        for k in 0..2_000_000 {
+            let x = -300.0 + k as f64 * 3.0e-4 + 1.234e-7;
+            let (c, s) = sincos_cycles(x);
+            let w = std::f64::consts::TAU * x;
+            worst = worst.max((c - w.cos()).abs()).max((s - w.sin()).abs());
+        }
+        assert!(worst < 1e-12, "worst error {worst:e}");
+        let mut near: f64 = 0.0;
+        for k in 0..100_000 {
+            let x = -1.0 + k as f64 * 2.0e-5 + 1.234e-9;
+            let (c, s) = sincos_cycles(x);
+            let w = std::f64::consts::TAU * x;
+            near = near.max((c - w.cos()).abs()).max((s - w.sin()).abs());
+        }
+        assert!(near < 1e-15, "worst error near zero {near:e}");
     }
 }

@@ -10,7 +10,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::patterns::FringeAxis;
-use crate::sim::cos_cycles;
+use crate::sim::sincos_cycles;
 
 /// Largest number of reflections modelled.
 pub const MAX_REFLECTIONS: usize = 3;
@@ -132,7 +132,7 @@ fn eval_row(design: &Design, f: &FrameMeta, p: &Params, row: &mut [f64]) -> f64 
     row[0] = 1.0;
     for j in 0..k {
         let x = t * ax.s(p.uv[j][0], p.uv[j][1]) + f.phase_cycles;
-        let (c, s) = (cos_cycles(x), cos_cycles(x - 0.25));
+        let (c, s) = sincos_cycles(x);
         row[1 + j] = e * c;
         let g = -p.amp[j] * e * s * std::f64::consts::TAU * t;
         row[1 + k + 2 * j] = g * ax.a;
@@ -166,14 +166,14 @@ fn normal_fixed<const N: usize>(design: &Design, index: &[u32], y: &[f64], p: &P
         rss += r * r;
         for a in 0..N {
             jtr[a] += row[a] * r;
-            for b in 0..N {
+            for b in a..N {
                 jtj[a][b] += row[a] * row[b];
             }
         }
     }
     Normal {
         rss,
-        jtj: DMatrix::from_fn(N, N, |a, b| jtj[a][b]),
+        jtj: DMatrix::from_fn(N, N, |a, b| jtj[a.min(b)][a.max(b)]),
         jtr: DVector::from_column_slice(&jtr),
     }
 }
