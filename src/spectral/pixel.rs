@@ -31,6 +31,11 @@ pub struct PixelContext<'a> {
     pub plans: &'a SpectrumPlans,
     /// The station's prediction for this pixel (flat surfaces).
     pub prior: &'a PixelPaths,
+    /// Where the prior has a front but no back path (the flat plate's back
+    /// ray leaves through the rim), the back-minus-front offset of the
+    /// nearest pixel that has both: the real surfaces can still send a back
+    /// reflection here, and a one-reflection fit of two would be wrong.
+    pub borrowed_offset: Option<[f64; 2]>,
     /// Starting κ = 1/τ_max².
     pub kappa0: f64,
     /// Whether a third reflection may be modelled.
@@ -208,7 +213,7 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
         return out;
     };
     let one = fit_from(ctx, &index, &y, &[start(1, &[centre], ctx.kappa0)]);
-    let d12 = offset(ctx.prior, 0, 1);
+    let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
     let mut two = None;
     let mut three = None;
     if let Some(d) = d12 {

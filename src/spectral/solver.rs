@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::init::SpectrumPlans;
 use super::model::{Axis, Design, FrameMeta};
-use super::pixel::{fit_pixel, PixelContext, PixelFits};
+use super::pixel::{fit_pixel, PixelContext, PixelFits, Scored};
 use super::{flags, PixelResult};
 use crate::acquisition::FrameInfo;
 use crate::npy::{self, NpyError};
@@ -250,12 +250,14 @@ impl SpectralSolver {
             .tau_max_guess
             .unwrap_or_else(|| self.design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
             .powi(-2);
+        let borrowed = borrowed_offsets(&self.prior, &self.candidates);
         let results: Vec<(u32, PixelFits)> = self
             .candidates
             .par_iter()
+            .zip(borrowed)
             .enumerate()
             .with_min_len(16)
-            .map(|(q, &p)| {
+            .map(|(q, (&p, borrowed_offset))| {
                 let raw = &self.series[q * n..(q + 1) * n];
                 let mut excluded = 0;
                 let y: Vec<f64> = raw
@@ -273,6 +275,7 @@ impl SpectralSolver {
                     design: &self.design,
                     plans: &self.plans,
                     prior: &self.prior.pixels[p as usize],
+                    borrowed_offset,
                     kappa0,
                     allow_third: self.config.third_reflection,
                     max_iter: self.config.max_iter,
@@ -290,18 +293,31 @@ impl SpectralSolver {
         ];
         let mut preferred = vec![0u8; self.width * self.height];
         for (p, fits) in results {
+            let own = |models: &[Option<Scored>]| {
+                models
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(k, c)| c.map(|c| (k, c)))
+                    .min_by(|a, b| a.1.bic.total_cmp(&b.1.bic))
+            };
             // The scene's model where it applies; where the geometry allows
             // fewer reflections (the back path leaves through the rim), the
-            // largest model that applies.
-            let chosen = fits.per_model[..scene_model].iter().rev().flatten().next();
+            // largest model that applies. Where the flat plate's back path
+            // leaves through the rim but the real one may not (the offset is
+            // borrowed), the pixel's own BIC decides.
+            let rim = self.prior.pixels[p as usize].back.is_err();
+            let chosen = if rim {
+                own(&fits.per_model[..scene_model]).map(|(_, c)| c)
+            } else {
+                fits.per_model[..scene_model]
+                    .iter()
+                    .rev()
+                    .flatten()
+                    .next()
+                    .copied()
+            };
             pixels[p as usize] = chosen.map_or(fits.base, |c| c.result);
-            preferred[p as usize] = fits
-                .per_model
-                .iter()
-                .enumerate()
-                .filter_map(|(k, c)| c.map(|c| (k + 1, c.bic)))
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map_or(0, |(k, _)| k as u8);
+            preferred[p as usize] = own(&fits.per_model).map_or(0, |(k, _)| k as u8 + 1);
         }
         Ok(SpectralMaps {
             width: self.width,
@@ -395,6 +411,56 @@ fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, SpectralErr
         axes,
         directions_deg,
     })
+}
+
+/// Farthest a back-minus-front offset is borrowed from, camera px.
+const BORROW_RADIUS: i64 = 32;
+
+/// For each candidate whose prior has a front but no back path, the
+/// back-minus-front offset averaged over the nearest ring (up to
+/// [`BORROW_RADIUS`]) of pixels that have both; the offset varies slowly
+/// over the element, so the nearest ring predicts it well.
+fn borrowed_offsets(prior: &TracedView, candidates: &[u32]) -> Vec<Option<[f64; 2]>> {
+    let (w, h) = (prior.width as i64, prior.height as i64);
+    let both = |x: i64, y: i64| -> Option<[f64; 2]> {
+        if !(0..w).contains(&x) || !(0..h).contains(&y) {
+            return None;
+        }
+        let p = &prior.pixels[(y * w + x) as usize];
+        match (p.front, p.back) {
+            (Ok(f), Ok(b)) => Some([b.u - f.u, b.v - f.v]),
+            _ => None,
+        }
+    };
+    candidates
+        .iter()
+        .map(|&k| {
+            let p = &prior.pixels[k as usize];
+            if p.front.is_err() || p.back.is_ok() {
+                return None;
+            }
+            let (x, y) = (i64::from(k) % w, i64::from(k) / w);
+            (1..=BORROW_RADIUS).find_map(|r| {
+                let ring = (-r..=r).flat_map(|d| {
+                    [
+                        (x + d, y - r),
+                        (x + d, y + r),
+                        (x - r, y + d),
+                        (x + r, y + d),
+                    ]
+                });
+                let (mut sum, mut n) = ([0.0; 2], 0.0);
+                for (i, j) in ring {
+                    if let Some(d) = both(i, j) {
+                        sum[0] += d[0];
+                        sum[1] += d[1];
+                        n += 1.0;
+                    }
+                }
+                (n > 0.0).then(|| [sum[0] / n, sum[1] / n])
+            })
+        })
+        .collect()
 }
 
 /// Pixels whose front or back path exists in the prior, grown by `margin` px.
@@ -510,5 +576,54 @@ impl SpectralMaps {
             .iter()
             .filter(|p| p.s[0][0].is_finite() && p.s[1][0].is_finite())
             .count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::{Miss, PixelPaths, ScreenHit};
+
+    fn hit(u: f64, v: f64) -> Result<ScreenHit, Miss> {
+        Ok(ScreenHit { u, v, weight: 0.04 })
+    }
+
+    #[test]
+    fn rim_pixels_borrow_the_nearest_ring_offset() {
+        // 5×3 view: columns 0–2 have both paths with offsets (10, x), column
+        // 3 only the front, column 4 nothing.
+        let (w, h) = (5usize, 3usize);
+        let pixels = (0..w * h)
+            .map(|k| {
+                let x = (k % w) as f64;
+                let miss = Err(Miss::ElementMissed);
+                let (front, back) = match k % w {
+                    0..=2 => (hit(x, 0.0), hit(x + 10.0, x)),
+                    3 => (hit(x, 0.0), miss),
+                    _ => (miss, miss),
+                };
+                PixelPaths {
+                    front,
+                    back,
+                    third: miss,
+                }
+            })
+            .collect();
+        let view = TracedView {
+            width: w,
+            height: h,
+            pixels,
+        };
+        let all: Vec<u32> = (0..(w * h) as u32).collect();
+        let got = borrowed_offsets(&view, &all);
+        for (k, g) in got.iter().enumerate() {
+            match k % w {
+                // The nearest ring of (3, 1) holds column 2 at three rows
+                // (offset (10, 2)); of (3, 0) and (3, 2), two of them.
+                3 => assert_eq!(*g, Some([10.0, 2.0]), "pixel {k}"),
+                // Both paths, or no front: nothing borrowed.
+                _ => assert_eq!(*g, None, "pixel {k}"),
+            }
+        }
     }
 }
