@@ -184,6 +184,44 @@ fn five_percent_noise_reaches_the_bound() {
 }
 
 #[test]
+fn saturated_samples_are_left_out_not_averaged_in() {
+    // The default gain puts the brightest possible sample at 90 % of full
+    // scale; 1.6× clips the crests of the low-τ fringes (where e(τ) ≈ 1) of
+    // the brighter pixels. Noise-free, the remaining samples determine the
+    // points as exactly as before: the same 0.01 px criterion.
+    let st = station(10.0);
+    let (front, back) = RandomSurfaceSpec::default()
+        .draw_pair(25.5, [0.0, 0.0], 21)
+        .unwrap();
+    let view = TracedView::trace(&st, &Plate::new(&st, front, back, 3.0));
+    let g = SimCamera::new(&view, &st.screen, SimParams::default())
+        .unwrap()
+        .gain();
+    let params = SimParams {
+        gain: Some(1.6 * g),
+        ..SimParams::default()
+    };
+    let r = run(&st, params, &paper_schedule());
+    let saturated = r
+        .maps
+        .pixels
+        .iter()
+        .filter(|p| p.flags & flags::SATURATED != 0)
+        .count();
+    let [(rms1, _, worst1, found1, n1), (rms2, _, worst2, found2, n2)] = score(&r);
+    eprintln!(
+        "1.6x gain: {saturated} pixels with clipped samples; S1 RMS {rms1:.2e} worst {worst1:.2e} \
+         px ({found1}/{n1}), S2 RMS {rms2:.2e} worst {worst2:.2e} px ({found2}/{n2})"
+    );
+    // The scene must really clip: most element pixels reach the crest.
+    assert!(saturated as f64 > 0.5 * n1 as f64, "{saturated} of {n1}");
+    for (worst, found, n) in [(worst1, found1, n1), (worst2, found2, n2)] {
+        assert!(worst <= 0.01, "worst {worst} px");
+        assert!(found as f64 >= 0.99 * n as f64, "{found}/{n}");
+    }
+}
+
+#[test]
 fn an_ar_coated_back_gives_one_reflection() {
     let params = SimParams {
         path_scale: [1.0, 0.0, 0.0],
