@@ -10,7 +10,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::patterns::FringeAxis;
-use crate::sim::sincos_cycles;
+use crate::sim::{cos_cycles, sincos_cycles};
 
 /// Largest number of reflections modelled.
 pub const MAX_REFLECTIONS: usize = 3;
@@ -198,6 +198,13 @@ pub struct Fit {
 /// below 1e-11.
 const STEP_TOL_PX: f64 = 1e-5;
 const RSS_TOL: f64 = 1e-11;
+/// Convergence, statistically: the step lowered χ² = RSS/σ̂² (σ̂² = RSS/(N − p),
+/// the residuals' own noise level) by less than this. A Gauss–Newton step
+/// that lowers χ² by ε moves the parameters by ~√ε of their standard
+/// deviations, so 1e-3 leaves ~0.03σ — a 0.05 % change of the error RMS —
+/// and stops fits of a wrong model (one reflection of two), whose RSS creeps
+/// down linearly, after a few steps instead of ~15.
+const CHI2_TOL: f64 = 1e-3;
 
 /// Levenberg–Marquardt with Marquardt's diagonal scaling from `start`.
 pub fn levenberg_marquardt(
@@ -229,7 +236,9 @@ pub fn levenberg_marquardt(
                 let u = trial.u_index(j);
                 step[u].abs() < STEP_TOL_PX && step[u + 1].abs() < STEP_TOL_PX
             });
-            let small_change = (ne.rss - trial_ne.rss) <= RSS_TOL * ne.rss.max(1e-300);
+            let sigma2 = trial_ne.rss / (y.len().saturating_sub(p.len())).max(1) as f64;
+            let small_change =
+                (ne.rss - trial_ne.rss) <= (RSS_TOL * ne.rss).max(CHI2_TOL * sigma2).max(1e-300);
             p = trial;
             ne = trial_ne;
             lambda = (lambda / 3.0).max(1e-12);
@@ -255,26 +264,55 @@ pub fn levenberg_marquardt(
     }
 }
 
+/// `exp(−κ τ_i²)` of the frames in `index`: the envelope [`linear_amplitudes_in`]
+/// reuses across the screen points it is asked about.
+pub fn envelope(design: &Design, index: &[u32], kappa: f64) -> Vec<f64> {
+    index
+        .iter()
+        .map(|&i| {
+            let t = design.frames[i as usize].tau;
+            (-kappa * t * t).exp()
+        })
+        .collect()
+}
+
 /// Least-squares background and amplitudes at fixed screen points and κ
 /// (the linear part of the model), by normal equations on (1 + K) columns;
 /// returns them with the residual sum of squares.
 pub fn linear_amplitudes(design: &Design, index: &[u32], y: &[f64], p: &Params) -> (Params, f64) {
+    linear_amplitudes_in(design, index, y, &envelope(design, index, p.kappa), p)
+}
+
+/// [`linear_amplitudes`] with the envelope `env` of `p.kappa` given.
+pub fn linear_amplitudes_in(
+    design: &Design,
+    index: &[u32],
+    y: &[f64],
+    env: &[f64],
+    p: &Params,
+) -> (Params, f64) {
     let k = p.k;
     let n = 1 + k;
-    let mut g = DMatrix::<f64>::zeros(n, n);
-    let mut h = DVector::<f64>::zeros(n);
-    let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
+    let mut g = [[0.0; MAX_REFLECTIONS + 1]; MAX_REFLECTIONS + 1];
+    let mut h = [0.0; MAX_REFLECTIONS + 1];
+    let mut row = [1.0; MAX_REFLECTIONS + 1];
     let mut yy = 0.0;
-    for (&i, &yi) in index.iter().zip(y) {
-        eval_row(design, &design.frames[i as usize], p, &mut row);
+    for ((&i, &yi), &e) in index.iter().zip(y).zip(env) {
+        let f = &design.frames[i as usize];
+        let ax = design.axes[f.dir];
+        for j in 0..k {
+            row[1 + j] = e * cos_cycles(f.tau * ax.s(p.uv[j][0], p.uv[j][1]) + f.phase_cycles);
+        }
         yy += yi * yi;
         for a in 0..n {
             h[a] += row[a] * yi;
-            for b in 0..n {
-                g[(a, b)] += row[a] * row[b];
+            for b in a..n {
+                g[a][b] += row[a] * row[b];
             }
         }
     }
+    let g = DMatrix::from_fn(n, n, |a, b| g[a.min(b)][a.max(b)]);
+    let h = DVector::from_column_slice(&h[..n]);
     let mut out = *p;
     let mut rss = f64::INFINITY;
     if let Some(sol) = g.cholesky().map(|c| c.solve(&h)) {

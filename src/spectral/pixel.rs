@@ -7,7 +7,10 @@
 use nalgebra::DMatrix;
 
 use super::init::SpectrumPlans;
-use super::model::{levenberg_marquardt, linear_amplitudes, Design, Fit, Params, MAX_REFLECTIONS};
+use super::model::{
+    envelope, levenberg_marquardt, linear_amplitudes, linear_amplitudes_in, Design, Fit, Params,
+    MAX_REFLECTIONS,
+};
 use super::{flags, PixelResult};
 use crate::trace::PixelPaths;
 
@@ -96,6 +99,7 @@ fn pair_start(
             .filter(|(&i, _)| ctx.design.frames[i as usize].dir == dir)
             .map(|(&i, &v)| (i, v))
             .unzip();
+        let env = envelope(ctx.design, &idx, kappa);
         let delta = ax.a * d[0] + ax.b * d[1];
         let norm2 = ax.a * ax.a + ax.b * ax.b;
         // A screen point whose coordinate on this axis is μ (the other is free).
@@ -104,10 +108,11 @@ fn pair_start(
         for k in 0..=12 {
             let t = -1.25 + 0.125 * f64::from(k);
             let m = [mus[dir] + t * delta, mus[dir] + (t + 1.0) * delta];
-            let (p, rss) = linear_amplitudes(
+            let (p, rss) = linear_amplitudes_in(
                 ctx.design,
                 &idx,
                 &yd,
+                &env,
                 &start(2, &[point(m[0]), point(m[1])], kappa),
             );
             if p.amp[0] > 0.0 && p.amp[1] > 0.0 && rss < best.0 {
