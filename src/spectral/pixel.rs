@@ -36,8 +36,9 @@ pub struct PixelContext<'a> {
     pub prior: &'a PixelPaths,
     /// Where the prior has a front but no back path (the flat plate's back
     /// ray leaves through the rim), the back-minus-front offset of the
-    /// nearest pixel that has both: the real surfaces can still send a back
-    /// reflection here, and a one-reflection fit of two would be wrong.
+    /// nearest pixel that has both, within the candidates' margin: the real
+    /// plate can still send a back reflection here, and a one-reflection fit
+    /// of two would be wrong.
     pub borrowed_offset: Option<[f64; 2]>,
     /// Starting κ = 1/τ_max².
     pub kappa0: f64,

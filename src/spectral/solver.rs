@@ -250,7 +250,11 @@ impl SpectralSolver {
             .tau_max_guess
             .unwrap_or_else(|| self.design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
             .powi(-2);
-        let borrowed = borrowed_offsets(&self.prior, &self.candidates);
+        let borrowed = borrowed_offsets(
+            &self.prior,
+            &self.candidates,
+            i64::from(self.config.margin_px),
+        );
         let results: Vec<(u32, PixelFits)> = self
             .candidates
             .par_iter()
@@ -413,14 +417,14 @@ fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, SpectralErr
     })
 }
 
-/// Farthest a back-minus-front offset is borrowed from, camera px.
-const BORROW_RADIUS: i64 = 32;
-
 /// For each candidate whose prior has a front but no back path, the
-/// back-minus-front offset averaged over the nearest ring (up to
-/// [`BORROW_RADIUS`]) of pixels that have both; the offset varies slowly
-/// over the element, so the nearest ring predicts it well.
-fn borrowed_offsets(prior: &TracedView, candidates: &[u32]) -> Vec<Option<[f64; 2]>> {
+/// back-minus-front offset averaged over the nearest ring (up to `radius`
+/// px) of pixels that have both; the offset varies slowly over the element,
+/// so the nearest ring predicts it well. The radius is the candidates'
+/// margin: how far the real element may sit from where the station puts it,
+/// and so how far the real edge of the back reflection may lie from the
+/// flat plate's. Farther in, the back path really leaves through the rim.
+fn borrowed_offsets(prior: &TracedView, candidates: &[u32], radius: i64) -> Vec<Option<[f64; 2]>> {
     let (w, h) = (prior.width as i64, prior.height as i64);
     let both = |x: i64, y: i64| -> Option<[f64; 2]> {
         if !(0..w).contains(&x) || !(0..h).contains(&y) {
@@ -440,7 +444,7 @@ fn borrowed_offsets(prior: &TracedView, candidates: &[u32]) -> Vec<Option<[f64; 
                 return None;
             }
             let (x, y) = (i64::from(k) % w, i64::from(k) / w);
-            (1..=BORROW_RADIUS).find_map(|r| {
+            (1..=radius).find_map(|r| {
                 let ring = (-r..=r).flat_map(|d| {
                     [
                         (x + d, y - r),
@@ -615,7 +619,13 @@ mod tests {
             pixels,
         };
         let all: Vec<u32> = (0..(w * h) as u32).collect();
-        let got = borrowed_offsets(&view, &all);
+        // Within one ring only column 3 reaches a pixel with both paths.
+        let near = borrowed_offsets(&view, &all, 1);
+        assert!(near
+            .iter()
+            .enumerate()
+            .all(|(k, g)| g.is_some() == (k % w == 3)));
+        let got = borrowed_offsets(&view, &all, 4);
         for (k, g) in got.iter().enumerate() {
             match k % w {
                 // The nearest ring of (3, 1) holds column 2 at three rows
