@@ -40,6 +40,11 @@ pub fn coefficients(out: &Path, name: &str, f: &SurfaceFigures) -> anyhow::Resul
         REMOVED_TERMS + 1
     );
     let skip = REMOVED_TERMS.min(f.coefficients_nm.len());
+    if skip == f.coefficients_nm.len() {
+        // The model chose piston and tilt alone: nothing beyond them to chart.
+        println!("{name}: no Zernike terms beyond tilt, no {name}_coefficients.png");
+        return Ok(());
+    }
     coefficient_chart_png(
         &out.join(format!("{name}_coefficients.png")),
         &f.coefficients_nm[skip..],
