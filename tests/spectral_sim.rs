@@ -8,7 +8,9 @@ use mfd::acquisition::FrameInfo;
 use mfd::patterns::Schedule;
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
 use mfd::spectral::model::{normal_equations, Params};
-use mfd::spectral::{flags, SpectralConfig, SpectralMaps, SpectralSolver};
+use mfd::spectral::{
+    flags, CpuFits, FitBackend, FitBatch, SpectralConfig, SpectralMaps, SpectralSolver,
+};
 use mfd::station::Station;
 use mfd::trace::{Plate, TracedView};
 
@@ -376,4 +378,79 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts() {
             k + 1
         );
     }
+}
+
+/// A backend that fits on one thread, last candidate first, and counts.
+struct Reversed(std::sync::atomic::AtomicUsize);
+
+impl FitBackend for Reversed {
+    fn fit(&self, batch: &FitBatch) -> Vec<mfd::spectral::pixel::PixelFits> {
+        let n = batch.candidates.len();
+        self.0.store(n, std::sync::atomic::Ordering::Relaxed);
+        let mut out: Vec<_> = (0..n).rev().map(|q| batch.fit_one(q)).collect();
+        out.reverse();
+        out
+    }
+}
+
+/// A backend that answers for no pixel.
+struct Empty;
+
+impl FitBackend for Empty {
+    fn fit(&self, _: &FitBatch) -> Vec<mfd::spectral::pixel::PixelFits> {
+        Vec::new()
+    }
+}
+
+#[test]
+fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
+    // Short schedule (τ ≤ 60): only the plumbing is under test here.
+    let st = station(30.0);
+    let schedule = Schedule {
+        tau_stop: 60.0,
+        ..Schedule::default()
+    };
+    let view = TracedView::trace(&st, &Plate::new(&st, flat(&st), flat(&st), 3.0));
+    let mut cam = SimCamera::new(&view, &st.screen, SimParams::default()).unwrap();
+    let patterns = schedule.patterns();
+    let frames = FrameInfo::from_patterns(&patterns);
+    let mut solver = SpectralSolver::new(&st, &frames, SpectralConfig::default()).unwrap();
+    let mut buf = vec![0u16; st.camera.pixel_count()];
+    for (k, p) in patterns.iter().enumerate() {
+        cam.render(p, k as u64, &mut buf);
+        solver.push_frame(k, &buf).unwrap();
+    }
+    let reference = solver.solve_with(&CpuFits).unwrap();
+    let counted = Reversed(std::sync::atomic::AtomicUsize::new(0));
+    let other = solver.solve_with(&counted).unwrap();
+    assert_eq!(
+        counted.0.load(std::sync::atomic::Ordering::Relaxed),
+        solver.candidate_pixels()
+    );
+    // The same fits in another order give bit-identical maps (NaN included).
+    let bits = |m: &SpectralMaps| -> Vec<u64> {
+        m.screen_cov()
+            .into_iter()
+            .chain(m.screen_coords())
+            .map(f64::to_bits)
+            .collect()
+    };
+    assert!(bits(&reference) == bits(&other), "maps differ");
+    assert!(reference
+        .pixels
+        .iter()
+        .zip(&other.pixels)
+        .all(|(a, b)| a.flags == b.flags));
+    assert!(reference.found_both() > 0);
+    let err = solver.solve_with(&Empty).unwrap_err().to_string();
+    assert!(err.contains("backend returned 0 results"), "{err}");
+}
+
+fn flat(st: &Station) -> mfd::zernike::ZernikeSurface {
+    let e = &st.element;
+    mfd::zernike::ZernikeSurface::flat(
+        e.aperture_radius_mm,
+        [e.aperture_center_mm.x, e.aperture_center_mm.y],
+    )
+    .unwrap()
 }

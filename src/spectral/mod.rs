@@ -18,7 +18,9 @@ pub mod model;
 pub mod pixel;
 mod solver;
 
-pub use solver::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
+pub use solver::{
+    CpuFits, FitBackend, FitBatch, SpectralConfig, SpectralError, SpectralMaps, SpectralSolver,
+};
 
 use nalgebra::DMatrix;
 

@@ -233,6 +233,16 @@ impl SpectralSolver {
     /// # Errors
     /// [`SpectralError::Frame`] when frames are missing.
     pub fn solve(&self) -> Result<SpectralMaps, SpectralError> {
+        self.solve_with(&CpuFits)
+    }
+
+    /// [`SpectralSolver::solve`] with the per-pixel fits run by `backend`.
+    ///
+    /// # Errors
+    /// [`SpectralError::Frame`] when frames are missing;
+    /// [`SpectralError::Schedule`] when the backend answers for the wrong
+    /// number of pixels.
+    pub fn solve_with(&self, backend: &dyn FitBackend) -> Result<SpectralMaps, SpectralError> {
         if self.received != self.frames() {
             return Err(SpectralError::Frame {
                 frame: self.received,
@@ -243,7 +253,6 @@ impl SpectralSolver {
                 ),
             });
         }
-        let n = self.frames();
         let sat = self.saturation();
         let kappa0 = self
             .config
@@ -255,38 +264,29 @@ impl SpectralSolver {
             &self.candidates,
             i64::from(self.config.margin_px),
         );
-        let results: Vec<(u32, PixelFits)> = self
-            .candidates
-            .par_iter()
-            .zip(borrowed)
-            .enumerate()
-            .with_min_len(16)
-            .map(|(q, (&p, borrowed_offset))| {
-                let raw = &self.series[q * n..(q + 1) * n];
-                let mut excluded = 0;
-                let y: Vec<f64> = raw
-                    .iter()
-                    .map(|&v| {
-                        if v == 0 || sat.is_some_and(|s| v >= s) {
-                            excluded += 1;
-                            f64::NAN
-                        } else {
-                            f64::from(v)
-                        }
-                    })
-                    .collect();
-                let ctx = PixelContext {
-                    design: &self.design,
-                    plans: &self.plans,
-                    prior: &self.prior.pixels[p as usize],
-                    borrowed_offset,
-                    kappa0,
-                    allow_third: self.config.third_reflection,
-                    max_iter: self.config.max_iter,
-                };
-                (p, fit_pixel(&ctx, &y, excluded))
-            })
-            .collect();
+        let batch = FitBatch {
+            design: &self.design,
+            plans: &self.plans,
+            prior: &self.prior,
+            candidates: &self.candidates,
+            borrowed: &borrowed,
+            series: &self.series,
+            saturation: sat,
+            kappa0,
+            allow_third: self.config.third_reflection,
+            max_iter: self.config.max_iter,
+        };
+        let fits = backend.fit(&batch);
+        if fits.len() != self.candidates.len() {
+            return Err(SpectralError::Schedule {
+                problem: format!(
+                    "the fit backend returned {} results for {} pixels",
+                    fits.len(),
+                    self.candidates.len()
+                ),
+            });
+        }
+        let results: Vec<(u32, PixelFits)> = self.candidates.iter().copied().zip(fits).collect();
         let (scene_model, bic_sums) = scene_model(&results, self.config.third_reflection);
         let mut pixels = vec![
             PixelResult {
@@ -342,6 +342,91 @@ impl SpectralSolver {
     /// The geometry prior (flat surfaces through the nominal station).
     pub fn prior(&self) -> &TracedView {
         &self.prior
+    }
+}
+
+/// Everything the per-pixel fits of one acquisition need: the schedule, the
+/// geometry prior and the series of the candidate pixels, pixel-major (the
+/// `frames` samples of candidate q at `series[q * frames..]`, raw counts).
+pub struct FitBatch<'a> {
+    /// The schedule.
+    pub design: &'a Design,
+    /// Periodogram plans.
+    pub plans: &'a SpectrumPlans,
+    /// The flat-plate prediction of every camera pixel.
+    pub prior: &'a TracedView,
+    /// Camera pixel index of each candidate, row-major.
+    pub candidates: &'a [u32],
+    /// Per candidate, the back-minus-front offset borrowed at the rim.
+    pub borrowed: &'a [Option<[f64; 2]>],
+    /// The series, pixel-major.
+    pub series: &'a [u16],
+    /// Samples at or above this count (and at 0) are excluded.
+    pub saturation: Option<u16>,
+    /// Starting κ = 1/τ_max².
+    pub kappa0: f64,
+    /// Whether a third reflection may be modelled.
+    pub allow_third: bool,
+    /// Levenberg–Marquardt iteration cap.
+    pub max_iter: usize,
+}
+
+impl FitBatch<'_> {
+    /// Frames per series.
+    pub fn frames(&self) -> usize {
+        self.design.frames.len()
+    }
+
+    /// Candidate `q` fitted on this thread (the reference every backend must
+    /// reproduce).
+    pub fn fit_one(&self, q: usize) -> PixelFits {
+        let n = self.frames();
+        let raw = &self.series[q * n..(q + 1) * n];
+        let mut excluded = 0;
+        let y: Vec<f64> = raw
+            .iter()
+            .map(|&v| {
+                if v == 0 || self.saturation.is_some_and(|s| v >= s) {
+                    excluded += 1;
+                    f64::NAN
+                } else {
+                    f64::from(v)
+                }
+            })
+            .collect();
+        let ctx = PixelContext {
+            design: self.design,
+            plans: self.plans,
+            prior: &self.prior.pixels[self.candidates[q] as usize],
+            borrowed_offset: self.borrowed[q],
+            kappa0: self.kappa0,
+            allow_third: self.allow_third,
+            max_iter: self.max_iter,
+        };
+        fit_pixel(&ctx, &y, excluded)
+    }
+}
+
+/// Where the per-pixel fits run. The pixels are independent, so the batch
+/// can go to any data-parallel device: this is the seam for a GPU (wgpu
+/// compute) backend, which must return one [`PixelFits`] per candidate, in
+/// order, matching [`FitBatch::fit_one`]. [`CpuFits`] is the path CI tests.
+pub trait FitBackend: Sync {
+    /// Fits every candidate of `batch`.
+    fn fit(&self, batch: &FitBatch) -> Vec<PixelFits>;
+}
+
+/// The per-pixel fits on all CPU cores (rayon).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CpuFits;
+
+impl FitBackend for CpuFits {
+    fn fit(&self, batch: &FitBatch) -> Vec<PixelFits> {
+        (0..batch.candidates.len())
+            .into_par_iter()
+            .with_min_len(16)
+            .map(|q| batch.fit_one(q))
+            .collect()
     }
 }
 
