@@ -50,14 +50,8 @@ fn run_patterns(
         .draw_pair(25.5, [0.0, 0.0], 21)
         .unwrap();
     let view = TracedView::trace(station, &Plate::new(station, front, back, 3.0));
-    let mut cam = SimCamera::new(&view, &station.screen, params.clone()).unwrap();
+    let (solver, cam) = fed_solver(station, &view, params.clone(), patterns, config);
     let frames: Vec<_> = FrameInfo::from_patterns(patterns);
-    let mut solver = SpectralSolver::new(station, &frames, config).unwrap();
-    let mut buf = vec![0u16; station.camera.pixel_count()];
-    for (k, p) in patterns.iter().enumerate() {
-        cam.render(p, k as u64, &mut buf);
-        solver.push_frame(k, &buf).unwrap();
-    }
     let maps = solver.solve().unwrap();
     // The bound of the same joint model at the truth (A, B from the Fresnel
     // weights and gain, κ = 1/τ_max², σ the read noise).
@@ -99,6 +93,25 @@ fn run_patterns(
         })
         .collect();
     Run { view, maps, crb }
+}
+
+/// A solver that has taken every frame the simulated camera renders of `view`.
+fn fed_solver(
+    station: &Station,
+    view: &TracedView,
+    params: SimParams,
+    patterns: &[mfd::patterns::Pattern],
+    config: SpectralConfig,
+) -> (SpectralSolver, SimCamera) {
+    let mut cam = SimCamera::new(view, &station.screen, params).unwrap();
+    let frames: Vec<_> = FrameInfo::from_patterns(patterns);
+    let mut solver = SpectralSolver::new(station, &frames, config).unwrap();
+    let mut buf = vec![0u16; station.camera.pixel_count()];
+    for (k, p) in patterns.iter().enumerate() {
+        cam.render(p, k as u64, &mut buf);
+        solver.push_frame(k, &buf).unwrap();
+    }
+    (solver, cam)
 }
 
 /// Per reflection: (RMS error, RMS bound, worst error, found, expected).
@@ -411,15 +424,13 @@ fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
         ..Schedule::default()
     };
     let view = TracedView::trace(&st, &Plate::new(&st, flat(&st), flat(&st), 3.0));
-    let mut cam = SimCamera::new(&view, &st.screen, SimParams::default()).unwrap();
-    let patterns = schedule.patterns();
-    let frames = FrameInfo::from_patterns(&patterns);
-    let mut solver = SpectralSolver::new(&st, &frames, SpectralConfig::default()).unwrap();
-    let mut buf = vec![0u16; st.camera.pixel_count()];
-    for (k, p) in patterns.iter().enumerate() {
-        cam.render(p, k as u64, &mut buf);
-        solver.push_frame(k, &buf).unwrap();
-    }
+    let (solver, _) = fed_solver(
+        &st,
+        &view,
+        SimParams::default(),
+        &schedule.patterns(),
+        SpectralConfig::default(),
+    );
     let reference = solver.solve_with(&CpuFits).unwrap();
     let counted = Reversed(std::sync::atomic::AtomicUsize::new(0));
     let other = solver.solve_with(&counted).unwrap();
