@@ -454,7 +454,7 @@ fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
         .all(|(a, b)| a.flags == b.flags));
     assert!(reference.found_both() > 0);
     let err = solver.solve_with(&Empty).unwrap_err().to_string();
-    assert!(err.contains("backend returned 0 results"), "{err}");
+    assert!(err.contains("fit backend: returned 0 results"), "{err}");
 }
 
 fn flat(st: &Station) -> mfd::zernike::ZernikeSurface {

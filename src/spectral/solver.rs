@@ -30,6 +30,12 @@ pub enum SpectralError {
         /// What is wrong.
         problem: String,
     },
+    /// A fit backend broke its contract.
+    #[error("fit backend: {problem}")]
+    Backend {
+        /// What it did.
+        problem: String,
+    },
     /// A frame does not fit the acquisition.
     #[error("frame {frame}: {problem}")]
     Frame {
@@ -240,7 +246,7 @@ impl SpectralSolver {
     ///
     /// # Errors
     /// [`SpectralError::Frame`] when frames are missing;
-    /// [`SpectralError::Schedule`] when the backend answers for the wrong
+    /// [`SpectralError::Backend`] when the backend answers for the wrong
     /// number of pixels.
     pub fn solve_with(&self, backend: &dyn FitBackend) -> Result<SpectralMaps, SpectralError> {
         if self.received != self.frames() {
@@ -278,9 +284,9 @@ impl SpectralSolver {
         };
         let fits = backend.fit(&batch);
         if fits.len() != self.candidates.len() {
-            return Err(SpectralError::Schedule {
+            return Err(SpectralError::Backend {
                 problem: format!(
-                    "the fit backend returned {} results for {} pixels",
+                    "returned {} results for {} pixels",
                     fits.len(),
                     self.candidates.len()
                 ),
