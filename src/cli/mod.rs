@@ -44,3 +44,14 @@ pub fn load_surfaces(
         make(file.back_coefficients())?,
     ))
 }
+
+/// The spectral engine named on the command line (`--engine`).
+pub fn parse_engine(name: &str) -> anyhow::Result<mfd::spectral::Engine> {
+    use mfd::spectral::Engine;
+    match name {
+        "auto" => Ok(Engine::Auto),
+        "series" => Ok(Engine::Series),
+        "statistics" | "stats" => Ok(Engine::Statistics),
+        other => anyhow::bail!("--engine: expected auto, series or statistics, found {other:?}"),
+    }
+}

@@ -153,7 +153,7 @@ impl SpectrumPlans {
 }
 
 /// Largest value above `mu_min` with a parabolic refinement on log power.
-fn refine_peak(mus: &[f64], power: &[f64], mu_min: f64) -> Option<(f64, f64)> {
+pub(super) fn refine_peak(mus: &[f64], power: &[f64], mu_min: f64) -> Option<(f64, f64)> {
     let start = mus.iter().position(|&m| m >= mu_min)?;
     let (k, &pk) = power
         .iter()

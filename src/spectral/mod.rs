@@ -13,13 +13,15 @@
 //! model at the noise level the residuals show.
 
 pub mod bound;
+pub mod compact;
 pub mod init;
 pub mod model;
 pub mod pixel;
 mod solver;
 
 pub use solver::{
-    CpuFits, FitBackend, FitBatch, SpectralConfig, SpectralError, SpectralMaps, SpectralSolver,
+    CpuFits, Engine, FitBackend, FitBatch, SpectralConfig, SpectralError, SpectralMaps,
+    SpectralSolver, SERIES_LIMIT_BYTES,
 };
 
 use nalgebra::DMatrix;
@@ -47,6 +49,9 @@ pub mod flags {
     pub const NOT_CONVERGED: u16 = 128;
     /// Every model needed a negative amplitude: no physical fit.
     pub const NEGATIVE_AMPLITUDE: u16 = 256;
+    /// The fit left the band of screen positions (around the station's
+    /// prediction) that the streaming statistics keep: both NaN.
+    pub const OUT_OF_BAND: u16 = 512;
 }
 
 /// The solver's answer for one pixel.

@@ -178,6 +178,111 @@ fn normal_fixed<const N: usize>(design: &Design, index: &[u32], y: &[f64], p: &P
     }
 }
 
+/// A pixel's samples as the fits see them: the series itself
+/// ([`SeriesSamples`]) or its sufficient statistics
+/// ([`super::compact::CompactSamples`]). Both give the same least squares.
+pub trait Samples {
+    /// Samples used.
+    fn count(&self) -> usize;
+    /// RSS, JᵀJ and Jᵀr at `p`.
+    fn normal(&self, p: &Params) -> Normal;
+    /// JᵀJ at `p` (the schedule's part of the Fisher information; no data).
+    fn information(&self, p: &Params) -> DMatrix<f64>;
+    /// Least-squares background and amplitudes at `p`'s screen points and κ,
+    /// over direction `dir`'s samples alone when given; with the RSS.
+    fn linear(&self, p: &Params, dir: Option<usize>) -> (Params, f64);
+    /// Strongest periodogram peak of direction `d` and its power over the
+    /// noise's median power: `(μ, ratio)`.
+    fn peak(&self, d: usize) -> Option<(f64, f64)>;
+    /// Whether the samples describe the model at `p` (statistics hold only
+    /// within a band around the station's prediction; a series everywhere).
+    fn within_band(&self, _p: &Params) -> bool {
+        true
+    }
+}
+
+/// The series of one pixel: used frames `index` with values `y`.
+pub struct SeriesSamples<'a> {
+    design: &'a Design,
+    plans: &'a super::init::SpectrumPlans,
+    index: Vec<u32>,
+    y: Vec<f64>,
+    y_by_frame: &'a [f64],
+    /// Per direction: its used frames, values and envelope at `kappa_dir`.
+    dirs: Vec<(Vec<u32>, Vec<f64>, Vec<f64>)>,
+    kappa_dir: f64,
+}
+
+impl<'a> SeriesSamples<'a> {
+    /// The finite samples of `y_by_frame` (NaN: excluded); per-direction
+    /// envelopes are kept for `kappa0`, the κ the starting scans use.
+    pub fn new(
+        design: &'a Design,
+        plans: &'a super::init::SpectrumPlans,
+        y_by_frame: &'a [f64],
+        kappa0: f64,
+    ) -> Self {
+        let index: Vec<u32> = (0..y_by_frame.len() as u32)
+            .filter(|&i| y_by_frame[i as usize].is_finite())
+            .collect();
+        let y: Vec<f64> = index.iter().map(|&i| y_by_frame[i as usize]).collect();
+        let dirs = (0..design.axes.len())
+            .map(|dir| {
+                let (idx, yd): (Vec<u32>, Vec<f64>) = index
+                    .iter()
+                    .zip(&y)
+                    .filter(|(&i, _)| design.frames[i as usize].dir == dir)
+                    .map(|(&i, &v)| (i, v))
+                    .unzip();
+                let env = envelope(design, &idx, kappa0);
+                (idx, yd, env)
+            })
+            .collect();
+        SeriesSamples {
+            design,
+            plans,
+            index,
+            y,
+            y_by_frame,
+            dirs,
+            kappa_dir: kappa0,
+        }
+    }
+}
+
+impl Samples for SeriesSamples<'_> {
+    fn count(&self) -> usize {
+        self.index.len()
+    }
+
+    fn normal(&self, p: &Params) -> Normal {
+        normal_equations(self.design, &self.index, &self.y, p)
+    }
+
+    fn information(&self, p: &Params) -> DMatrix<f64> {
+        let zeros = vec![0.0; self.index.len()];
+        normal_equations(self.design, &self.index, &zeros, p).jtj
+    }
+
+    fn linear(&self, p: &Params, dir: Option<usize>) -> (Params, f64) {
+        match dir {
+            None => linear_amplitudes(self.design, &self.index, &self.y, p),
+            Some(d) => {
+                let (idx, yd, env) = &self.dirs[d];
+                if p.kappa == self.kappa_dir {
+                    linear_amplitudes_in(self.design, idx, yd, env, p)
+                } else {
+                    linear_amplitudes(self.design, idx, yd, p)
+                }
+            }
+        }
+    }
+
+    fn peak(&self, d: usize) -> Option<(f64, f64)> {
+        self.plans.peak(d, self.y_by_frame)
+    }
+}
+
 /// Outcome of a Levenberg–Marquardt fit.
 #[derive(Debug, Clone)]
 pub struct Fit {
@@ -207,15 +312,9 @@ const RSS_TOL: f64 = 1e-11;
 const CHI2_TOL: f64 = 1e-3;
 
 /// Levenberg–Marquardt with Marquardt's diagonal scaling from `start`.
-pub fn levenberg_marquardt(
-    design: &Design,
-    index: &[u32],
-    y: &[f64],
-    start: Params,
-    max_iter: usize,
-) -> Fit {
+pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_iter: usize) -> Fit {
     let mut p = start;
-    let mut ne = normal_equations(design, index, y, &p);
+    let mut ne = data.normal(&p);
     let mut lambda = 1e-3;
     let mut converged = false;
     let mut iterations = 0;
@@ -230,13 +329,13 @@ pub fn levenberg_marquardt(
             continue;
         };
         let trial = p.add(&step);
-        let trial_ne = normal_equations(design, index, y, &trial);
+        let trial_ne = data.normal(&trial);
         if trial_ne.rss.is_finite() && trial_ne.rss <= ne.rss {
             let small_step = (0..p.k).all(|j| {
                 let u = trial.u_index(j);
                 step[u].abs() < STEP_TOL_PX && step[u + 1].abs() < STEP_TOL_PX
             });
-            let sigma2 = trial_ne.rss / (y.len().saturating_sub(p.len())).max(1) as f64;
+            let sigma2 = trial_ne.rss / (data.count().saturating_sub(p.len())).max(1) as f64;
             let small_change =
                 (ne.rss - trial_ne.rss) <= (RSS_TOL * ne.rss).max(CHI2_TOL * sigma2).max(1e-300);
             p = trial;

@@ -7,10 +7,7 @@
 use nalgebra::DMatrix;
 
 use super::init::SpectrumPlans;
-use super::model::{
-    envelope, levenberg_marquardt, linear_amplitudes, linear_amplitudes_in, Design, Fit, Params,
-    MAX_REFLECTIONS,
-};
+use super::model::{levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples, MAX_REFLECTIONS};
 use super::{flags, PixelResult};
 use crate::trace::PixelPaths;
 
@@ -84,23 +81,15 @@ fn start(k: usize, uv: &[[f64; 2]], kappa: f64) -> Params {
 /// the direction, t ∈ [−1.25, 0.25], and keep the best linear fit with
 /// positive amplitudes on that direction's frames alone. Directions are
 /// scanned apart because each one's peak is biased along its own axis.
-fn pair_start(
+fn pair_start<S: Samples + ?Sized>(
     ctx: &PixelContext,
-    index: &[u32],
-    y: &[f64],
+    data: &S,
     mus: &[f64],
     d: &[f64; 2],
     kappa: f64,
 ) -> Params {
     let mut pair_mu = vec![[0.0; 2]; mus.len()];
     for (dir, ax) in ctx.design.axes.iter().enumerate() {
-        let (idx, yd): (Vec<u32>, Vec<f64>) = index
-            .iter()
-            .zip(y)
-            .filter(|(&i, _)| ctx.design.frames[i as usize].dir == dir)
-            .map(|(&i, &v)| (i, v))
-            .unzip();
-        let env = envelope(ctx.design, &idx, kappa);
         let delta = ax.a * d[0] + ax.b * d[1];
         let norm2 = ax.a * ax.a + ax.b * ax.b;
         // A screen point whose coordinate on this axis is μ (the other is free).
@@ -109,12 +98,9 @@ fn pair_start(
         for k in 0..=12 {
             let t = -1.25 + 0.125 * f64::from(k);
             let m = [mus[dir] + t * delta, mus[dir] + (t + 1.0) * delta];
-            let (p, rss) = linear_amplitudes_in(
-                ctx.design,
-                &idx,
-                &yd,
-                &env,
+            let (p, rss) = data.linear(
                 &start(2, &[point(m[0]), point(m[1])], kappa),
+                Some(dir),
             );
             if p.amp[0] > 0.0 && p.amp[1] > 0.0 && rss < best.0 {
                 best = (rss, m);
@@ -134,12 +120,12 @@ struct Candidate {
     bic: f64,
 }
 
-fn fit_from(ctx: &PixelContext, index: &[u32], y: &[f64], starts: &[Params]) -> Candidate {
+fn fit_from<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, starts: &[Params]) -> Candidate {
     // The best start with physical (positive) amplitudes; a start whose
     // linear fit needs a negative one sits in an unphysical basin.
     let scored: Vec<(Params, f64)> = starts
         .iter()
-        .map(|s| linear_amplitudes(ctx.design, index, y, s))
+        .map(|s| data.linear(s, None))
         .collect();
     let positive = |p: &Params| p.amp[..p.k].iter().all(|&b| b > 0.0);
     let (best_start, _) = scored
@@ -153,8 +139,8 @@ fn fit_from(ctx: &PixelContext, index: &[u32], y: &[f64], starts: &[Params]) -> 
         })
         .copied()
         .expect("at least one start");
-    let fit = levenberg_marquardt(ctx.design, index, y, best_start, ctx.max_iter);
-    let n = index.len() as f64;
+    let fit = levenberg_marquardt(data, best_start, ctx.max_iter);
+    let n = data.count() as f64;
     let bic = n * (fit.rss / n).max(1e-300).ln() + fit.params.len() as f64 * n.ln();
     Candidate { fit, bic }
 }
@@ -189,6 +175,12 @@ pub struct PixelFits {
 /// Fits one pixel with one, two and (when allowed) three reflections. `y`
 /// is indexed by frame, NaN where a sample is excluded.
 pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> PixelFits {
+    let data = SeriesSamples::new(ctx.design, ctx.plans, y_by_frame, ctx.kappa0);
+    fit_samples(ctx, &data, excluded)
+}
+
+/// [`fit_pixel`] on any form of the pixel's samples.
+pub fn fit_samples<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, excluded: usize) -> PixelFits {
     let mut out = PixelFits {
         per_model: [None; MAX_REFLECTIONS],
         base: PixelResult::empty(),
@@ -196,17 +188,13 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
     if excluded > 0 {
         out.base.flags |= flags::SATURATED;
     }
-    let index: Vec<u32> = (0..y_by_frame.len() as u32)
-        .filter(|&i| y_by_frame[i as usize].is_finite())
-        .collect();
-    let y: Vec<f64> = index.iter().map(|&i| y_by_frame[i as usize]).collect();
-    if index.len() < 4 * (3 * MAX_REFLECTIONS + 2) {
+    if data.count() < 4 * (3 * MAX_REFLECTIONS + 2) {
         out.base.flags |= flags::NO_DATA;
         return out;
     }
     let mut mus = Vec::new();
     for d in 0..ctx.design.axes.len() {
-        match ctx.plans.peak(d, y_by_frame) {
+        match data.peak(d) {
             Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(mu),
             _ => {
                 out.base.flags |= flags::NO_SIGNAL;
@@ -218,28 +206,18 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
         out.base.flags |= flags::NO_DATA;
         return out;
     };
-    let one = fit_from(ctx, &index, &y, &[start(1, &[centre], ctx.kappa0)]);
+    let one = fit_from(ctx, data, &[start(1, &[centre], ctx.kappa0)]);
     let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
     let mut two = None;
     let mut three = None;
     if let Some(d) = d12 {
-        let mut best = fit_from(
-            ctx,
-            &index,
-            &y,
-            &[pair_start(ctx, &index, &y, &mus, &d, ctx.kappa0)],
-        );
+        let mut best = fit_from(ctx, data, &[pair_start(ctx, data, &mus, &d, ctx.kappa0)]);
         if best.bic >= one.bic {
             // Search for the pair once more around the single point, so that
             // a pair the first search missed is not scored as one reflection.
             let p = one.fit.params.uv[0];
             let mus1: Vec<f64> = ctx.design.axes.iter().map(|ax| ax.s(p[0], p[1])).collect();
-            let again = fit_from(
-                ctx,
-                &index,
-                &y,
-                &[pair_start(ctx, &index, &y, &mus1, &d, ctx.kappa0)],
-            );
+            let again = fit_from(ctx, data, &[pair_start(ctx, data, &mus1, &d, ctx.kappa0)]);
             if again.fit.rss < best.fit.rss {
                 best = again;
             }
@@ -250,8 +228,7 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
                 let s3 = [p.uv[1][0] + d3[0], p.uv[1][1] + d3[1]];
                 three = Some(fit_from(
                     ctx,
-                    &index,
-                    &y,
+                    data,
                     &[start(3, &[p.uv[0], p.uv[1], s3], p.kappa)],
                 ));
             }
@@ -261,7 +238,7 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
     let merged = one.fit.params;
     for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
         out.per_model[k] = cand.map(|c| Scored {
-            result: finalize(ctx, &c, &index, d12, &merged, out.base),
+            result: finalize(ctx, &c, data, d12, &merged, out.base),
             bic: c.bic,
         });
     }
@@ -272,10 +249,10 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
 /// checks, uncertainties.
 /// `merged` is the one-reflection fit: its amplitude and falloff describe
 /// the pixel's signal robustly, so they judge whether a pair is separable.
-fn finalize(
+fn finalize<S: Samples + ?Sized>(
     ctx: &PixelContext,
     cand: &Candidate,
-    index: &[u32],
+    data: &S,
     d12: Option<[f64; 2]>,
     merged: &Params,
     base: PixelResult,
@@ -283,9 +260,13 @@ fn finalize(
     let mut out = base;
     let fit = &cand.fit;
     let p = fit.params;
-    let n = index.len();
+    let n = data.count();
     if p.amp[..p.k].iter().any(|&b| b <= 0.0) {
         out.flags |= flags::NEGATIVE_AMPLITUDE;
+        return out;
+    }
+    if !data.within_band(&p) {
+        out.flags |= flags::OUT_OF_BAND;
         return out;
     }
     out.model = p.k as u8;
@@ -314,7 +295,7 @@ fn finalize(
         // back reflection of the expected strength at the expected offset
         // would have been resolved is its absence real (AR-coated back).
         out.separation_bins = separation_bins(ctx, &d);
-        let sd = expected_separation_std(ctx, index, &p, p.uv[0], p.amp[0], &d, sigma2);
+        let sd = expected_separation_std(ctx, data, &p, p.uv[0], p.amp[0], &d, sigma2);
         if RESOLVE_SIGMAS * sd > d[0].hypot(d[1]) {
             out.flags |= flags::UNRESOLVED;
             return out;
@@ -352,7 +333,7 @@ fn finalize(
         .as_ref()
         .map_or(f64::INFINITY, |c| separation_std(c, &p, i0, i1));
     let sd_expected =
-        expected_separation_std(ctx, index, merged, merged.uv[0], merged.amp[0], &d, sigma2);
+        expected_separation_std(ctx, data, merged, merged.uv[0], merged.amp[0], &d, sigma2);
     let expected = d[0].hypot(d[1]);
     if RESOLVE_SIGMAS * sd.max(sd_expected) > expected {
         out.flags |= flags::UNRESOLVED;
@@ -374,9 +355,9 @@ fn finalize(
 /// and Fresnel amplitude ratio, centred (amplitude-weighted) on `centre`,
 /// with total amplitude `amp`, at noise `sigma2`: how well this pixel's data
 /// could separate the reflections the geometry expects, whatever the fit found.
-fn expected_separation_std(
+fn expected_separation_std<S: Samples + ?Sized>(
     ctx: &PixelContext,
-    index: &[u32],
+    data: &S,
     fitted: &Params,
     centre: [f64; 2],
     amp: f64,
@@ -396,9 +377,7 @@ fn expected_separation_std(
     p.offset = fitted.offset;
     p.amp[0] = amp * (1.0 - w);
     p.amp[1] = amp * w;
-    let zeros = vec![0.0; index.len()];
-    let ne = super::model::normal_equations(ctx.design, index, &zeros, &p);
-    ne.jtj.try_inverse().map_or(f64::INFINITY, |inv| {
+    data.information(&p).try_inverse().map_or(f64::INFINITY, |inv| {
         separation_std(&(inv * sigma2), &p, 0, 1)
     })
 }

@@ -6,9 +6,10 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
+use super::compact::{CompactStats, STATS_BLOCK};
 use super::init::SpectrumPlans;
 use super::model::{Axis, Design, FrameMeta};
-use super::pixel::{fit_pixel, PixelContext, PixelFits, Scored};
+use super::pixel::{fit_pixel, fit_samples, PixelContext, PixelFits, Scored};
 use super::{flags, PixelResult};
 use crate::acquisition::FrameInfo;
 use crate::npy::{self, NpyError};
@@ -49,9 +50,30 @@ pub enum SpectralError {
     Npy(#[from] NpyError),
 }
 
+/// How the solver keeps the pixels' data between frames and fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Engine {
+    /// Statistics when the series would exceed [`SERIES_LIMIT_BYTES`], else series.
+    #[default]
+    Auto,
+    /// Every sample (2 bytes per pixel and frame); fits anywhere on the screen.
+    Series,
+    /// Per-pixel sufficient statistics ([`super::compact`]): fixed memory per
+    /// pixel, fits within a band around the station's prediction.
+    Statistics,
+}
+
+/// Above this size of the series, [`Engine::Auto`] keeps statistics.
+pub const SERIES_LIMIT_BYTES: usize = 1 << 31;
+
 /// Settings of the spectral stage.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpectralConfig {
+    /// Series or statistics.
+    pub engine: Engine,
+    /// Statistics engine: how far (Fourier bins) beyond the predicted points
+    /// the band of kept screen positions reaches, per direction.
+    pub band_bins: f64,
     /// Starting τ_max of the modulation falloff; `None`: the schedule's largest τ.
     pub tau_max_guess: Option<f64>,
     /// Allow a third reflection (second internal round trip).
@@ -73,6 +95,8 @@ pub struct SpectralConfig {
 impl Default for SpectralConfig {
     fn default() -> Self {
         SpectralConfig {
+            engine: Engine::Auto,
+            band_bins: 3.0,
             tau_max_guess: None,
             third_reflection: false,
             saturation_counts: None,
@@ -112,6 +136,7 @@ pub struct SpectralSolver {
     prior: TracedView,
     candidates: Vec<u32>,
     series: Vec<u16>,
+    stats: Option<Box<CompactStats>>,
     block: Vec<u16>,
     block_start: usize,
     received: usize,
@@ -146,11 +171,36 @@ impl SpectralSolver {
             let w = prior.width as u32;
             candidates.retain(|&p| (x0..x1).contains(&(p % w)) && (y0..y1).contains(&(p / w)));
         }
+        let series_bytes = candidates.len() * frames.len() * 2;
+        let use_stats = match config.engine {
+            Engine::Series => false,
+            Engine::Statistics => true,
+            Engine::Auto => series_bytes > SERIES_LIMIT_BYTES,
+        };
+        let stats = use_stats.then(|| {
+            let kappa0 = kappa_start(&config, &design);
+            let (centres, band) = band_centres(&design, &prior, &candidates, &config, &plans);
+            Box::new(CompactStats::new(
+                &design,
+                &centres,
+                &band,
+                // τ_max from a quarter of the schedule's (blur) to beyond
+                // infinity (κ < 0 lets the fit say "no falloff").
+                [-kappa0, 16.0 * kappa0],
+                config.saturation_counts,
+            ))
+        });
+        let block_len = if use_stats { STATS_BLOCK } else { BLOCK };
         Ok(SpectralSolver {
             width: prior.width,
             height: prior.height,
-            series: vec![0; candidates.len() * frames.len()],
-            block: Vec::with_capacity(BLOCK * candidates.len()),
+            series: if use_stats {
+                Vec::new()
+            } else {
+                vec![0; series_bytes / 2]
+            },
+            stats,
+            block: Vec::with_capacity(block_len * candidates.len()),
             block_start: 0,
             candidates,
             design,
@@ -172,9 +222,15 @@ impl SpectralSolver {
         self.design.frames.len()
     }
 
-    /// Bytes held for the series.
+    /// Bytes held for the series (or, with the statistics engine, the statistics).
     pub fn series_bytes(&self) -> usize {
-        self.series.len() * 2
+        self.series.len() * 2 + self.stats.as_ref().map_or(0, |s| s.bytes())
+    }
+
+    /// Whether the statistics engine is in use, with its node counts per
+    /// direction (data, products).
+    pub fn statistics_nodes(&self) -> Option<Vec<(usize, usize)>> {
+        self.stats.as_ref().map(|s| s.tables().nodes())
     }
 
     /// Takes frame `index`, which must be the next in capture order.
@@ -205,13 +261,33 @@ impl SpectralSolver {
             self.block.push(v);
         }
         self.received += 1;
-        if self.received - self.block_start == BLOCK || self.received == self.frames() {
+        let block = if self.stats.is_some() {
+            STATS_BLOCK
+        } else {
+            BLOCK
+        };
+        if self.received - self.block_start == block || self.received == self.frames() {
             self.flush();
+        }
+        if self.received == self.frames() {
+            if let Some(stats) = self.stats.as_mut() {
+                stats.seal();
+            }
         }
         Ok(())
     }
 
     fn flush(&mut self) {
+        if let Some(stats) = self.stats.as_mut() {
+            stats.ingest(
+                self.block_start,
+                self.received - self.block_start,
+                &self.block,
+            );
+            self.block.clear();
+            self.block_start = self.received;
+            return;
+        }
         let n = self.frames();
         let c = self.candidates.len();
         let rows = self.received - self.block_start;
@@ -260,11 +336,7 @@ impl SpectralSolver {
             });
         }
         let sat = self.saturation();
-        let kappa0 = self
-            .config
-            .tau_max_guess
-            .unwrap_or_else(|| self.design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
-            .powi(-2);
+        let kappa0 = kappa_start(&self.config, &self.design);
         let borrowed = borrowed_offsets(
             &self.prior,
             &self.candidates,
@@ -277,6 +349,7 @@ impl SpectralSolver {
             candidates: &self.candidates,
             borrowed: &borrowed,
             series: &self.series,
+            stats: self.stats.as_deref(),
             saturation: sat,
             kappa0,
             allow_third: self.config.third_reflection,
@@ -365,8 +438,10 @@ pub struct FitBatch<'a> {
     pub candidates: &'a [u32],
     /// Per candidate, the back-minus-front offset borrowed at the rim.
     pub borrowed: &'a [Option<[f64; 2]>],
-    /// The series, pixel-major.
+    /// The series, pixel-major (empty with the statistics engine).
     pub series: &'a [u16],
+    /// The statistics, with the statistics engine.
+    pub stats: Option<&'a CompactStats>,
     /// Samples at or above this count (and at 0) are excluded.
     pub saturation: Option<u16>,
     /// Starting κ = 1/τ_max².
@@ -386,6 +461,28 @@ impl FitBatch<'_> {
     /// Candidate `q` fitted on this thread (the reference every backend must
     /// reproduce).
     pub fn fit_one(&self, q: usize) -> PixelFits {
+        let ctx = PixelContext {
+            design: self.design,
+            plans: self.plans,
+            prior: &self.prior.pixels[self.candidates[q] as usize],
+            borrowed_offset: self.borrowed[q],
+            kappa0: self.kappa0,
+            allow_third: self.allow_third,
+            max_iter: self.max_iter,
+        };
+        if let Some(stats) = self.stats {
+            return match stats.samples(self.design, q, self.saturation) {
+                Some((data, excluded)) => fit_samples(&ctx, &data, excluded),
+                None => {
+                    let mut out = PixelFits {
+                        per_model: [None; super::model::MAX_REFLECTIONS],
+                        base: PixelResult::empty(),
+                    };
+                    out.base.flags = flags::SATURATED | flags::NO_DATA;
+                    out
+                }
+            };
+        }
         let n = self.frames();
         let raw = &self.series[q * n..(q + 1) * n];
         let mut excluded = 0;
@@ -400,15 +497,6 @@ impl FitBatch<'_> {
                 }
             })
             .collect();
-        let ctx = PixelContext {
-            design: self.design,
-            plans: self.plans,
-            prior: &self.prior.pixels[self.candidates[q] as usize],
-            borrowed_offset: self.borrowed[q],
-            kappa0: self.kappa0,
-            allow_third: self.allow_third,
-            max_iter: self.max_iter,
-        };
         fit_pixel(&ctx, &y, excluded)
     }
 }
@@ -556,6 +644,76 @@ fn borrowed_offsets(prior: &TracedView, candidates: &[u32], radius: i64) -> Vec<
             })
         })
         .collect()
+}
+
+/// Starting κ = 1/τ_max²: the configured guess or the schedule's largest τ.
+fn kappa_start(config: &SpectralConfig, design: &Design) -> f64 {
+    config
+        .tau_max_guess
+        .unwrap_or_else(|| design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
+        .powi(-2)
+}
+
+/// Per direction, each candidate's demodulation centre (μ) — the middle of
+/// the screen points the station predicts for it (front, back or its
+/// borrowed offset, third when allowed), taken from the nearest pixel with
+/// a prediction within the margin for candidates without one — and the
+/// band half-width: half the widest predicted spread plus `band_bins`.
+fn band_centres(
+    design: &Design,
+    prior: &TracedView,
+    candidates: &[u32],
+    config: &SpectralConfig,
+    plans: &SpectrumPlans,
+) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let w = prior.width as i64;
+    let h = prior.height as i64;
+    let borrowed = borrowed_offsets(prior, candidates, i64::from(config.margin_px));
+    let points = |k: usize, borrow: Option<[f64; 2]>| -> Vec<[f64; 2]> {
+        let p = &prior.pixels[k];
+        let mut pts = Vec::new();
+        for (i, path) in [p.front, p.back, p.third].iter().enumerate() {
+            if i == 2 && !config.third_reflection {
+                continue;
+            }
+            if let Ok(hit) = path {
+                pts.push([hit.u, hit.v]);
+            }
+        }
+        if let (Ok(f), Err(_), Some(d)) = (p.front, p.back, borrow) {
+            pts.push([f.u + d[0], f.v + d[1]]);
+        }
+        pts
+    };
+    let nd = design.axes.len();
+    let mut centres = vec![Vec::with_capacity(candidates.len()); nd];
+    let mut half = vec![0.0f64; nd];
+    for (c, &k) in candidates.iter().enumerate() {
+        let mut pts = points(k as usize, borrowed[c]);
+        if pts.is_empty() {
+            let (x, y) = (i64::from(k) % w, i64::from(k) / w);
+            pts = (1..=i64::from(config.margin_px))
+                .find_map(|r| {
+                    (-r..=r)
+                        .flat_map(|d| [(x + d, y - r), (x + d, y + r), (x - r, y + d), (x + r, y + d)])
+                        .filter(|&(i, j)| (0..w).contains(&i) && (0..h).contains(&j))
+                        .map(|(i, j)| points((j * w + i) as usize, None))
+                        .find(|p| !p.is_empty())
+                })
+                .unwrap_or_else(|| vec![[0.0, 0.0]]);
+        }
+        for (d, ax) in design.axes.iter().enumerate() {
+            let mus = pts.iter().map(|p| ax.s(p[0], p[1]));
+            let lo = mus.clone().fold(f64::INFINITY, f64::min);
+            let hi = mus.fold(f64::NEG_INFINITY, f64::max);
+            centres[d].push(0.5 * (lo + hi));
+            half[d] = half[d].max(0.5 * (hi - lo));
+        }
+    }
+    let band = (0..nd)
+        .map(|d| half[d] + config.band_bins * plans.bin(d))
+        .collect();
+    (centres, band)
 }
 
 /// Pixels whose front or back path exists in the prior, grown by `margin` px.

@@ -1,0 +1,1100 @@
+//! The pixels' series reduced, as frames arrive, to the sufficient
+//! statistics of the per-pixel least squares, so that a full sensor never
+//! has to be held as series (1296 × 966 × 2000 samples: 5 GB).
+//!
+//! The model of one direction (see [`super::model`]) is
+//! `A + Σ_k B_k Re(α_k(τ) e^{iθ_i(μ_c)})` with `θ_i(μ) = 2π(μ τ_i + φ_i)`,
+//! `α_k(τ) = e^{−κτ²} e^{2πi δ_k τ}`, `δ_k = μ_k − μ_c`: demodulated at a
+//! centre `μ_c` near the pixel's two points, every column of the model and of
+//! its Jacobian is `Re(α(τ) e^{iθ(μ_c)})` with `α` smooth in τ (a few cycles
+//! over the schedule when `|δ|` is a few Fourier bins). The data enter the
+//! normal equations only through `Σy`, `Σy²` and `Σ_i y_i α(τ_i) e^{iθ_i}`;
+//! for `α` within a degree-(Q−1) polynomial in τ (to 1e-10 over the band
+//! the pixel is allowed) that is `Σ_j α(τ_j) Z_j` over Q Chebyshev nodes
+//! `τ_j`, with `Z_j = Σ_i y_i e^{iθ_i} L_j(τ_i)` (`L_j` the cardinal
+//! polynomials of the nodes) — Q complex numbers per pixel and direction,
+//! accumulated frame by frame. The products of two columns need, besides
+//! the schedule's own `Σ_i L_j(τ_i)` (M) and `Σ_i e^{iθ_i} L_j(τ_i)` (E),
+//! `Σ_i e^{2iθ_i} L_j(τ_i)` (D): `Re(a e^{iθ}) Re(b e^{iθ}) = ½Re(a b̄) +
+//! ½Re(a b e^{2iθ})`. Centres are rounded to a grid of ¼ bin, so the
+//! schedule sums are tables shared by every pixel of a grid point, and the
+//! demodulation of a frame is one table per grid point, not one phase per
+//! pixel. Excluded (clipped) samples are left out of the pixel's sums and
+//! subtracted from its copy of the schedule sums.
+//!
+//! The least squares are then the series' own (same RSS, JᵀJ, Jᵀr to the
+//! interpolation tolerance), at O(Q) instead of O(frames) per evaluation,
+//! but only within the band: a point farther than the band from the
+//! station's prediction is flagged [`super::flags::OUT_OF_BAND`], never
+//! fitted with a wrong model.
+
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use rustfft::num_complex::Complex;
+
+use super::init::refine_peak;
+use super::model::{Design, Normal, Params, Samples, MAX_REFLECTIONS};
+use crate::sim::sincos_cycles;
+
+type C64 = Complex<f64>;
+
+/// Interpolation tolerance of the node sets, relative to the largest value
+/// of the interpolated function: the statistics reproduce the series' sums
+/// to this fraction of `Σ|y|` (far below the noise: 1e-10 of a sum of 10³
+/// samples is 1e-7 counts per sample; quantisation alone is 0.29).
+const NODE_TOL: f64 = 1e-10;
+
+/// Grid of demodulation centres, in Fourier bins.
+const GRID_BINS: f64 = 0.25;
+
+/// Frames demodulated together (the pixel's sums stay in cache over a block).
+pub const STATS_BLOCK: usize = 32;
+
+/// Chebyshev nodes on a τ interval and their cardinal polynomials.
+#[derive(Debug, Clone)]
+struct Nodes {
+    tau: Vec<f64>,
+    /// `T_q(s_j)` = cos(q θ_j), row j.
+    tq: Vec<f64>,
+    mid: f64,
+    half: f64,
+}
+
+impl Nodes {
+    fn new(lo: f64, hi: f64, q: usize) -> Nodes {
+        let mid = 0.5 * (lo + hi);
+        let half = (0.5 * (hi - lo)).max(1e-9);
+        let mut tau = Vec::with_capacity(q);
+        let mut tq = vec![0.0; q * q];
+        for j in 0..q {
+            let th = std::f64::consts::PI * (j as f64 + 0.5) / q as f64;
+            tau.push(mid + half * th.cos());
+            for k in 0..q {
+                tq[j * q + k] = (k as f64 * th).cos();
+            }
+        }
+        Nodes {
+            tau,
+            tq,
+            mid,
+            half,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.tau.len()
+    }
+
+    /// `L_j(τ)` for every node j: `Σ_j L_j(τ) f(τ_j)` is the degree-(Q−1)
+    /// interpolant of f. `L_j = (1/Q)[1 + 2 Σ_{q≥1} T_q(s_j) T_q(s)]`.
+    fn cardinal(&self, tau: f64, out: &mut [f64]) {
+        let q = self.len();
+        let s = ((tau - self.mid) / self.half).clamp(-1.0, 1.0);
+        let mut t = vec![0.0; q];
+        t[0] = 1.0;
+        if q > 1 {
+            t[1] = s;
+        }
+        for k in 2..q {
+            t[k] = 2.0 * s * t[k - 1] - t[k - 2];
+        }
+        for (j, o) in out.iter_mut().enumerate().take(q) {
+            let row = &self.tq[j * q..(j + 1) * q];
+            let mut acc = 0.5;
+            for k in 1..q {
+                acc += row[k] * t[k];
+            }
+            *o = 2.0 * acc / q as f64;
+        }
+    }
+
+    /// Largest interpolation error over the τ interval of
+    /// `(τ/hi)^deg e^{−κτ²} e^{2πiδτ}`, relative to its largest value, for
+    /// `|δ| ≤ delta`, `κ ∈ kappas`, `deg ≤ degree`.
+    fn error(&self, delta: f64, kappas: [f64; 2], degree: i32) -> f64 {
+        let q = self.len();
+        let lo = self.mid - self.half;
+        let hi = self.mid + self.half;
+        let mut card = vec![0.0; q];
+        let mut worst: f64 = 0.0;
+        let tests: Vec<f64> = (0..=96).map(|k| lo + (hi - lo) * k as f64 / 96.0).collect();
+        for &dl in &[delta, -delta, 0.61 * delta, 0.0] {
+            for &kappa in &kappas {
+                for deg in [0, degree] {
+                    let f = |t: f64| {
+                        let (c, s) = sincos_cycles(dl * t);
+                        C64::new(c, s) * ((t / hi).powi(deg) * (-kappa * t * t).exp())
+                    };
+                    let fj: Vec<C64> = self.tau.iter().map(|&t| f(t)).collect();
+                    let scale = tests.iter().map(|&t| f(t).norm()).fold(1e-300, f64::max);
+                    for &t in &tests {
+                        self.cardinal(t, &mut card);
+                        let v: C64 = fj.iter().zip(&card).map(|(a, &l)| a * l).sum();
+                        worst = worst.max((v - f(t)).norm() / scale);
+                    }
+                }
+            }
+        }
+        worst
+    }
+
+    /// The fewest nodes (multiple of 4, ≤ 256) meeting [`NODE_TOL`].
+    fn enough(lo: f64, hi: f64, delta: f64, kappas: [f64; 2], degree: i32) -> Nodes {
+        let mut q = 8;
+        loop {
+            let n = Nodes::new(lo, hi, q);
+            if q >= 256 || n.error(delta, kappas, degree) < NODE_TOL {
+                return n;
+            }
+            q += 4;
+        }
+    }
+}
+
+/// Schedule tables of one fringe direction.
+#[derive(Debug, Clone)]
+struct DirTables {
+    /// Nodes of the data sums (Z) and of the products of two columns.
+    data: Nodes,
+    gram: Nodes,
+    /// Cardinals of every frame of the direction (by position), row-major.
+    card_data: Vec<f64>,
+    card_gram: Vec<f64>,
+    /// M: Σ_i L_j(τ_i) over the direction's frames (gram nodes).
+    mz: Vec<f64>,
+    /// Grid step of the centres (μ), first grid index, count.
+    step: f64,
+    g0: i64,
+    ng: usize,
+    /// Per grid point: E on data and gram nodes, D on gram nodes.
+    ez_data: Vec<C64>,
+    ez_gram: Vec<C64>,
+    dz: Vec<C64>,
+    /// Half-width of the band around the centre, μ.
+    band: f64,
+    /// One Fourier bin, μ.
+    bin: f64,
+    /// Periodogram offsets δ (¼ bin apart over the band) and
+    /// `w(τ_j) e^{2πiδτ_j}` on the data nodes, w the Hann window.
+    pdelta: Vec<f64>,
+    pw: Vec<C64>,
+    /// Σ_i w(τ_i)² over the direction's frames.
+    w2: f64,
+}
+
+/// What the statistics of one acquisition share: the schedule's tables.
+#[derive(Debug, Clone)]
+pub struct CompactTables {
+    dirs: Vec<DirTables>,
+    /// Per frame: (direction, position among the direction's frames).
+    frame_pos: Vec<(usize, usize)>,
+    /// Per frame: τ and phase (cycles).
+    tau_phase: Vec<(f64, f64)>,
+    kappa_range: [f64; 2],
+}
+
+impl CompactTables {
+    /// Tables for `design`; per direction, centres `centres[d]` (μ, one per
+    /// pixel) with the band half-width `band[d]` (μ) around each; κ from
+    /// `kappa_range`.
+    fn new(design: &Design, centres: &[Vec<f64>], band: &[f64], kappa_range: [f64; 2]) -> Self {
+        let nd = design.axes.len();
+        let mut frame_pos = vec![(0, 0); design.frames.len()];
+        let mut per_dir: Vec<Vec<usize>> = vec![Vec::new(); nd];
+        for (i, f) in design.frames.iter().enumerate() {
+            frame_pos[i] = (f.dir, per_dir[f.dir].len());
+            per_dir[f.dir].push(i);
+        }
+        let dirs = (0..nd)
+            .map(|d| {
+                let frames = &per_dir[d];
+                let taus: Vec<f64> = frames.iter().map(|&i| design.frames[i].tau).collect();
+                let lo = taus.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = taus.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let bin = 1.0 / (hi - lo).max(1e-9);
+                let step = GRID_BINS * bin;
+                let delta = band[d] + 0.5 * step;
+                let data = Nodes::enough(lo, hi, delta, kappa_range, 2);
+                let gram = Nodes::enough(
+                    lo,
+                    hi,
+                    2.0 * delta,
+                    [2.0 * kappa_range[0], 2.0 * kappa_range[1]],
+                    4,
+                );
+                let (qd, qg) = (data.len(), gram.len());
+                let mut card_data = vec![0.0; taus.len() * qd];
+                let mut card_gram = vec![0.0; taus.len() * qg];
+                for (k, &t) in taus.iter().enumerate() {
+                    data.cardinal(t, &mut card_data[k * qd..(k + 1) * qd]);
+                    gram.cardinal(t, &mut card_gram[k * qg..(k + 1) * qg]);
+                }
+                let mut mz = vec![0.0; qg];
+                for row in card_gram.chunks(qg) {
+                    for (m, &c) in mz.iter_mut().zip(row) {
+                        *m += c;
+                    }
+                }
+                let gi: Vec<i64> = centres[d]
+                    .iter()
+                    .map(|&m| (m / step).round() as i64)
+                    .collect();
+                let g0 = gi.iter().copied().min().unwrap_or(0);
+                let ng = (gi.iter().copied().max().unwrap_or(0) - g0 + 1) as usize;
+                let phases: Vec<f64> = frames
+                    .iter()
+                    .map(|&i| design.frames[i].phase_cycles)
+                    .collect();
+                let per_g: Vec<(Vec<C64>, Vec<C64>, Vec<C64>)> = (0..ng)
+                    .into_par_iter()
+                    .map(|g| {
+                        let mu = (g0 + g as i64) as f64 * step;
+                        let mut ed = vec![C64::new(0.0, 0.0); qd];
+                        let mut eg = vec![C64::new(0.0, 0.0); qg];
+                        let mut dg = vec![C64::new(0.0, 0.0); qg];
+                        for (k, (&t, &ph)) in taus.iter().zip(&phases).enumerate() {
+                            let (c, s) = sincos_cycles(mu * t + ph);
+                            let e1 = C64::new(c, s);
+                            let e2 = e1 * e1;
+                            for (o, &l) in ed.iter_mut().zip(&card_data[k * qd..(k + 1) * qd]) {
+                                *o += e1 * l;
+                            }
+                            let row = &card_gram[k * qg..(k + 1) * qg];
+                            for ((oe, od), &l) in eg.iter_mut().zip(dg.iter_mut()).zip(row) {
+                                *oe += e1 * l;
+                                *od += e2 * l;
+                            }
+                        }
+                        (ed, eg, dg)
+                    })
+                    .collect();
+                let mut ez_data = Vec::with_capacity(ng * qd);
+                let mut ez_gram = Vec::with_capacity(ng * qg);
+                let mut dz = Vec::with_capacity(ng * qg);
+                for (a, b, c) in per_g {
+                    ez_data.extend(a);
+                    ez_gram.extend(b);
+                    dz.extend(c);
+                }
+                let hann = |t: f64| {
+                    let x = std::f64::consts::PI * (t - lo) * bin;
+                    x.sin().powi(2)
+                };
+                let w2 = taus.iter().map(|&t| hann(t).powi(2)).sum();
+                let nk = (band[d] / (0.25 * bin)).floor() as i64;
+                let pdelta: Vec<f64> = (-nk..=nk).map(|k| k as f64 * 0.25 * bin).collect();
+                let mut pw = Vec::with_capacity(pdelta.len() * qd);
+                for &dl in &pdelta {
+                    for &t in &data.tau {
+                        let (c, s) = sincos_cycles(dl * t);
+                        pw.push(C64::new(c, s) * hann(t));
+                    }
+                }
+                DirTables {
+                    data,
+                    gram,
+                    card_data,
+                    card_gram,
+                    mz,
+                    step,
+                    g0,
+                    ng,
+                    ez_data,
+                    ez_gram,
+                    dz,
+                    band: band[d],
+                    bin,
+                    pdelta,
+                    pw,
+                    w2,
+                }
+            })
+            .collect();
+        CompactTables {
+            dirs,
+            frame_pos,
+            tau_phase: design
+                .frames
+                .iter()
+                .map(|f| (f.tau, f.phase_cycles))
+                .collect(),
+            kappa_range,
+        }
+    }
+
+    /// Nodes per direction: (data, products).
+    pub fn nodes(&self) -> Vec<(usize, usize)> {
+        self.dirs
+            .iter()
+            .map(|t| (t.data.len(), t.gram.len()))
+            .collect()
+    }
+}
+
+/// A sample set aside at ingest because it may be clipped (0, a full scale
+/// 2^b − 1, or at or above the configured saturation): whether it is
+/// excluded is decided once the acquisition's saturation level is known.
+#[derive(Debug, Clone, Copy)]
+struct SetAside {
+    pixel: u32,
+    frame: u32,
+    value: u16,
+}
+
+/// Full scales of 8…16-bit cameras.
+const FULL_SCALES: [u16; 5] = [255, 1023, 4095, 16383, 65535];
+
+/// The running sufficient statistics of every candidate pixel.
+pub struct CompactStats {
+    tables: CompactTables,
+    /// Per pixel and direction: grid index of the centre (relative to g0).
+    grid: Vec<u32>,
+    /// Per pixel: the reference count y0 (its first sample), then for each
+    /// direction Z (2·Q_data: re, im), Σ(y − y0), Σ(y − y0)², n. Sums about
+    /// y0 keep the RSS, Σ(y − y0)² − …, free of the cancellation of Σy²
+    /// (~10¹² for 2000 samples of ~3·10⁴ counts, against an RSS of ~10²
+    /// without noise).
+    state: Vec<f64>,
+    stride: usize,
+    offsets: Vec<usize>,
+    set_aside: Vec<SetAside>,
+    /// Per pixel: samples set aside; past `cap` the pixel is given up.
+    counts: Vec<u32>,
+    cap: u32,
+    configured_saturation: Option<u16>,
+}
+
+impl CompactStats {
+    /// Statistics for `pixels` pixels whose centres, per pixel and
+    /// direction, are `centres[d][pixel]` (μ), with band half-widths
+    /// `band[d]` (μ); κ within `kappa_range`.
+    pub fn new(
+        design: &Design,
+        centres: &[Vec<f64>],
+        band: &[f64],
+        kappa_range: [f64; 2],
+        configured_saturation: Option<u16>,
+    ) -> Self {
+        let tables = CompactTables::new(design, centres, band, kappa_range);
+        let nd = tables.dirs.len();
+        let pixels = centres.first().map_or(0, Vec::len);
+        let mut offsets = Vec::with_capacity(nd);
+        let mut stride = 1;
+        for t in &tables.dirs {
+            offsets.push(stride);
+            stride += 2 * t.data.len() + 3;
+        }
+        let mut grid = vec![0u32; pixels * nd];
+        for (d, t) in tables.dirs.iter().enumerate() {
+            for (p, &m) in centres[d].iter().enumerate() {
+                grid[p * nd + d] = ((m / t.step).round() as i64 - t.g0) as u32;
+            }
+        }
+        let frames = tables.frame_pos.len();
+        CompactStats {
+            grid,
+            state: vec![0.0; pixels * stride],
+            stride,
+            offsets,
+            set_aside: Vec::new(),
+            counts: vec![0; pixels],
+            // A pixel with more than a quarter of its samples clipped is
+            // not fitted (flagged saturated, no data) and costs no memory.
+            cap: (frames / 4) as u32,
+            configured_saturation,
+            tables,
+        }
+    }
+
+    /// The schedule tables.
+    pub fn tables(&self) -> &CompactTables {
+        &self.tables
+    }
+
+    /// Bytes held by the per-pixel statistics and the set-aside samples.
+    pub fn bytes(&self) -> usize {
+        self.state.len() * 8
+            + self.grid.len() * 4
+            + self.counts.len() * 4
+            + self.set_aside.capacity() * std::mem::size_of::<SetAside>()
+    }
+
+    /// Adds frames `first..first + rows` (capture order), given frame-major
+    /// as `block[r * pixels + p]`, on all cores.
+    pub fn ingest(&mut self, first: usize, rows: usize, block: &[u16]) {
+        let pixels = self.counts.len();
+        if pixels == 0 || rows == 0 {
+            return;
+        }
+        let nd = self.tables.dirs.len();
+        // Demodulation tables of the block: per row, per grid point of the
+        // row's direction, e^{iθ_i(μ_g)} L_j(τ_i) on the data nodes, as
+        // interleaved (re, im) pairs — the layout of a pixel's Z.
+        let mut row_start = Vec::with_capacity(rows);
+        let mut w: Vec<f64> = Vec::new();
+        // Runs of rows of one direction: (first row, end, direction).
+        let mut runs: Vec<(usize, usize, usize)> = Vec::new();
+        for r in 0..rows {
+            let (d, pos) = self.tables.frame_pos[first + r];
+            match runs.last_mut() {
+                Some(run) if run.2 == d => run.1 = r + 1,
+                _ => runs.push((r, r + 1, d)),
+            }
+            let t = &self.tables.dirs[d];
+            row_start.push(w.len());
+            let q = t.data.len();
+            let card = &t.card_data[pos * q..(pos + 1) * q];
+            let (tau, ph) = self.tables.tau_phase[first + r];
+            for g in 0..t.ng {
+                let mu = (t.g0 + g as i64) as f64 * t.step;
+                let (c, s) = sincos_cycles(mu * tau + ph);
+                for &l in card {
+                    w.push(c * l);
+                    w.push(s * l);
+                }
+            }
+        }
+        let stride = self.stride;
+        let chunk = 256;
+        let tables = &self.tables;
+        let grid = &self.grid;
+        let offsets = &self.offsets;
+        let cap = self.cap;
+        let configured = self.configured_saturation;
+        let clipped =
+            |v: u16| v == 0 || FULL_SCALES.contains(&v) || configured.is_some_and(|s| v >= s);
+        let avx2 = has_avx2_fma();
+        let aside: Vec<Vec<SetAside>> = self
+            .state
+            .par_chunks_mut(chunk * stride)
+            .zip(self.counts.par_chunks_mut(chunk))
+            .enumerate()
+            .map(|(ci, (state, counts))| {
+                let mut out = Vec::new();
+                let mut items: Vec<(f64, usize)> = Vec::with_capacity(rows);
+                for (k, (st, count)) in state.chunks_mut(stride).zip(counts.iter_mut()).enumerate()
+                {
+                    let p = ci * chunk + k;
+                    if *count > cap {
+                        continue;
+                    }
+                    if first == 0 {
+                        st[0] = f64::from(block[p]);
+                    }
+                    let y0 = st[0];
+                    for &(r0, r1, d) in &runs {
+                        let q = tables.dirs[d].data.len();
+                        let g = grid[p * nd + d] as usize;
+                        let o = offsets[d];
+                        items.clear();
+                        let (mut s1, mut s2) = (0.0, 0.0);
+                        for r in r0..r1 {
+                            let v = block[r * pixels + p];
+                            if clipped(v) {
+                                *count += 1;
+                                if *count <= cap {
+                                    out.push(SetAside {
+                                        pixel: p as u32,
+                                        frame: (first + r) as u32,
+                                        value: v,
+                                    });
+                                }
+                                continue;
+                            }
+                            let y = f64::from(v);
+                            let c = y - y0;
+                            s1 += c;
+                            s2 += c * c;
+                            items.push((y, row_start[r] + 2 * g * q));
+                        }
+                        accumulate(&mut st[o..o + 2 * q], &items, &w, avx2);
+                        st[o + 2 * q] += s1;
+                        st[o + 2 * q + 1] += s2;
+                        st[o + 2 * q + 2] += items.len() as f64;
+                    }
+                }
+                out
+            })
+            .collect();
+        for a in aside {
+            self.set_aside.extend(a);
+        }
+    }
+}
+
+/// Whether this CPU has AVX2 and FMA (checked once).
+fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *HAS.get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// `z += Σ y · w[o..o + z.len()]` over `items = (y, o)`: the hot loop of the
+/// ingest, four rows at a time so that z is loaded and stored once per four.
+#[inline(always)]
+fn accumulate_portable(z: &mut [f64], items: &[(f64, usize)], w: &[f64]) {
+    let n = z.len();
+    let mut quads = items.chunks_exact(4);
+    for c in &mut quads {
+        let w0 = &w[c[0].1..c[0].1 + n];
+        let w1 = &w[c[1].1..c[1].1 + n];
+        let w2 = &w[c[2].1..c[2].1 + n];
+        let w3 = &w[c[3].1..c[3].1 + n];
+        let (y0, y1, y2, y3) = (c[0].0, c[1].0, c[2].0, c[3].0);
+        for k in 0..n {
+            z[k] += y0 * w0[k] + y1 * w1[k] + y2 * w2[k] + y3 * w3[k];
+        }
+    }
+    for &(y, o) in quads.remainder() {
+        for (zk, wk) in z.iter_mut().zip(&w[o..o + n]) {
+            *zk += y * wk;
+        }
+    }
+}
+
+/// [`accumulate_portable`] compiled for AVX2 and FMA.
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA ([`has_avx2_fma`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn accumulate_avx2(z: &mut [f64], items: &[(f64, usize)], w: &[f64]) {
+    accumulate_portable(z, items, w);
+}
+
+fn accumulate(z: &mut [f64], items: &[(f64, usize)], w: &[f64], avx2: bool) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is true only where the CPU has AVX2 and FMA.
+        unsafe { accumulate_avx2(z, items, w) };
+        return;
+    }
+    let _ = avx2;
+    accumulate_portable(z, items, w);
+}
+
+impl CompactStats {
+    /// Sorts the set-aside samples by pixel; call once all frames are in.
+    pub fn seal(&mut self) {
+        self.set_aside.sort_unstable_by_key(|s| (s.pixel, s.frame));
+    }
+
+    /// Pixels held.
+    pub fn pixels(&self) -> usize {
+        self.counts.len()
+    }
+
+    /// Pixel `p`'s statistics with samples at 0 or at/above `saturation`
+    /// excluded, and the number excluded; `None` when more than a quarter
+    /// of its samples were clipped (given up at ingest). Needs [`Self::seal`].
+    pub fn samples<'a>(
+        &'a self,
+        design: &'a Design,
+        p: usize,
+        saturation: Option<u16>,
+    ) -> Option<(CompactSamples<'a>, usize)> {
+        if self.counts[p] > self.cap {
+            return None;
+        }
+        let nd = self.tables.dirs.len();
+        let st = &self.state[p * self.stride..(p + 1) * self.stride];
+        let y0 = st[0];
+        let mut dirs: Vec<PixelDir> = self
+            .tables
+            .dirs
+            .iter()
+            .enumerate()
+            .map(|(d, t)| {
+                let q = t.data.len();
+                let qg = t.gram.len();
+                let o = self.offsets[d];
+                let g = self.grid[p * nd + d] as usize;
+                PixelDir {
+                    mu_c: (t.g0 + g as i64) as f64 * t.step,
+                    z: st[o..o + 2 * q]
+                        .chunks_exact(2)
+                        .map(|c| C64::new(c[0], c[1]))
+                        .collect(),
+                    ez_data: t.ez_data[g * q..(g + 1) * q].to_vec(),
+                    ez_gram: t.ez_gram[g * qg..(g + 1) * qg].to_vec(),
+                    dz: t.dz[g * qg..(g + 1) * qg].to_vec(),
+                    mz: t.mz.clone(),
+                    sy: st[o + 2 * q],
+                    syy: st[o + 2 * q + 1],
+                    n: st[o + 2 * q + 2],
+                }
+            })
+            .collect();
+        let from = self.set_aside.partition_point(|s| (s.pixel as usize) < p);
+        let to = self.set_aside.partition_point(|s| (s.pixel as usize) <= p);
+        let mut excluded = 0;
+        for s in &self.set_aside[from..to] {
+            let (d, pos) = self.tables.frame_pos[s.frame as usize];
+            let (tau, ph) = self.tables.tau_phase[s.frame as usize];
+            let t = &self.tables.dirs[d];
+            let pd = &mut dirs[d];
+            let (c, sn) = sincos_cycles(pd.mu_c * tau + ph);
+            let e1 = C64::new(c, sn);
+            let (q, qg) = (t.data.len(), t.gram.len());
+            let cd = &t.card_data[pos * q..(pos + 1) * q];
+            let cg = &t.card_gram[pos * qg..(pos + 1) * qg];
+            if s.value == 0 || saturation.is_some_and(|sat| s.value >= sat) {
+                excluded += 1;
+                for (o, &l) in pd.ez_data.iter_mut().zip(cd) {
+                    *o -= e1 * l;
+                }
+                let e2 = e1 * e1;
+                for (j, &l) in cg.iter().enumerate() {
+                    pd.ez_gram[j] -= e1 * l;
+                    pd.dz[j] -= e2 * l;
+                    pd.mz[j] -= l;
+                }
+            } else {
+                let y = f64::from(s.value);
+                for (o, &l) in pd.z.iter_mut().zip(cd) {
+                    *o += e1 * (y * l);
+                }
+                pd.sy += y - y0;
+                pd.syy += (y - y0) * (y - y0);
+                pd.n += 1.0;
+            }
+        }
+        let n = dirs.iter().map(|d| d.n).sum();
+        let sy = dirs.iter().map(|d| d.sy).sum();
+        let syy = dirs.iter().map(|d| d.syy).sum();
+        Some((
+            CompactSamples {
+                design,
+                tables: &self.tables,
+                dirs,
+                y0,
+                n,
+                sy,
+                syy,
+            },
+            excluded,
+        ))
+    }
+}
+
+/// One direction of one pixel: its statistics and its copy of the schedule sums.
+#[derive(Debug, Clone)]
+struct PixelDir {
+    mu_c: f64,
+    z: Vec<C64>,
+    ez_data: Vec<C64>,
+    ez_gram: Vec<C64>,
+    dz: Vec<C64>,
+    mz: Vec<f64>,
+    /// Σ(y − y0), Σ(y − y0)², samples.
+    sy: f64,
+    syy: f64,
+    n: f64,
+}
+
+/// One pixel's sufficient statistics, as the fits see them.
+pub struct CompactSamples<'a> {
+    design: &'a Design,
+    tables: &'a CompactTables,
+    dirs: Vec<PixelDir>,
+    /// Reference count; `sy`, `syy` are about it.
+    y0: f64,
+    n: f64,
+    sy: f64,
+    syy: f64,
+}
+
+/// Columns of one direction: `a_k` (B_k), `β_k` (μ_k), the κ column and the
+/// model, at most 2K + 2.
+const NX: usize = 2 * MAX_REFLECTIONS + 2;
+
+/// Inner products over one direction's samples: of two columns (`g`, upper
+/// triangle), of the constant with a column (`e`), of the data with a column (`y`).
+struct DirSums {
+    g: [[f64; NX]; NX],
+    e: [f64; NX],
+    y: [f64; NX],
+}
+
+impl CompactSamples<'_> {
+    /// Whether `p` stays where the statistics hold (band and κ range), on
+    /// direction `dir` alone when given.
+    fn inside(&self, p: &Params, margin_bins: f64, dir: Option<usize>) -> bool {
+        let [klo, khi] = self.tables.kappa_range;
+        if !(p.kappa >= klo && p.kappa <= khi) {
+            return false;
+        }
+        self.dirs.iter().zip(&self.tables.dirs).enumerate().all(|(d, (pd, t))| {
+            if dir.is_some_and(|x| x != d) {
+                return true;
+            }
+            let ax = self.design.axes[d];
+            p.uv[..p.k].iter().all(|uv| {
+                (ax.s(uv[0], uv[1]) - pd.mu_c).abs() <= t.band + (0.5 * GRID_BINS - margin_bins) * t.bin
+            })
+        })
+    }
+
+    /// Columns at τ for `p`, `nx` of them: `a_k`; with derivatives also
+    /// `β_k = 2πiτ B_k a_k` and `−τ² m`; last the model `m = Σ B_k a_k`.
+    #[inline]
+    fn columns(p: &Params, delta: &[f64; MAX_REFLECTIONS], derivs: bool, t: f64, out: &mut [C64; NX]) {
+        let k = p.k;
+        let e = (-p.kappa * t * t).exp();
+        let mut m = C64::new(0.0, 0.0);
+        for j in 0..k {
+            let (c, s) = sincos_cycles(delta[j] * t);
+            let a = C64::new(e * c, e * s);
+            out[j] = a;
+            m += a * p.amp[j];
+            if derivs {
+                let f = std::f64::consts::TAU * t * p.amp[j];
+                out[k + j] = C64::new(-a.im * f, a.re * f);
+            }
+        }
+        if derivs {
+            out[2 * k] = m * (-t * t);
+            out[2 * k + 1] = m;
+        } else {
+            out[k] = m;
+        }
+    }
+
+    fn dir_sums(&self, d: usize, p: &Params, derivs: bool, data: bool) -> DirSums {
+        let pd = &self.dirs[d];
+        let t = &self.tables.dirs[d];
+        let ax = self.design.axes[d];
+        let mut delta = [0.0; MAX_REFLECTIONS];
+        for j in 0..p.k {
+            delta[j] = ax.s(p.uv[j][0], p.uv[j][1]) - pd.mu_c;
+        }
+        let nx = if derivs { 2 * p.k + 2 } else { p.k + 1 };
+        let mut out = DirSums {
+            g: [[0.0; NX]; NX],
+            e: [0.0; NX],
+            y: [0.0; NX],
+        };
+        let mut col = [C64::new(0.0, 0.0); NX];
+        for (j, &tau) in t.gram.tau.iter().enumerate() {
+            Self::columns(p, &delta, derivs, tau, &mut col);
+            let hm = 0.5 * pd.mz[j];
+            let hd = 0.5 * pd.dz[j];
+            let ez = pd.ez_gram[j];
+            for x in 0..nx {
+                let cx = col[x];
+                out.e[x] += ez.re * cx.re - ez.im * cx.im;
+                // ½Re(M a b̄) + ½Re(D a b), M real.
+                let (dr, di) = (hd.re * cx.re - hd.im * cx.im, hd.re * cx.im + hd.im * cx.re);
+                let (mr, mi) = (hm * cx.re, hm * cx.im);
+                for y in x..nx {
+                    let cy = col[y];
+                    out.g[x][y] += mr * cy.re + mi * cy.im + dr * cy.re - di * cy.im;
+                }
+            }
+        }
+        if data {
+            for (j, &tau) in t.data.tau.iter().enumerate() {
+                Self::columns(p, &delta, derivs, tau, &mut col);
+                let z = pd.z[j];
+                for x in 0..nx {
+                    out.y[x] += z.re * col[x].re - z.im * col[x].im;
+                }
+            }
+        }
+        out
+    }
+
+    fn normal_with(&self, p: &Params, data: bool) -> Normal {
+        let k = p.k;
+        let np = p.len();
+        let mut jtj = DMatrix::<f64>::zeros(np, np);
+        let mut jtr = DVector::<f64>::zeros(np);
+        if !self.inside(p, 0.0, None) {
+            return Normal {
+                rss: f64::INFINITY,
+                jtj: DMatrix::identity(np, np),
+                jtr,
+            };
+        }
+        let a = p.offset;
+        // The offset about the reference: A' = A − y0, data y' = y − y0.
+        let ac = a - self.y0;
+        let m = 2 * k + 1;
+        jtj[(0, 0)] = self.n;
+        let mut rss = self.syy - 2.0 * ac * self.sy + ac * ac * self.n;
+        jtr[0] = self.sy - ac * self.n;
+        for d in 0..self.dirs.len() {
+            let s = self.dir_sums(d, p, true, data);
+            let ax = self.design.axes[d];
+            // Parameter → (column, factor).
+            let mut map = [(0usize, 0.0f64); 3 * MAX_REFLECTIONS + 2];
+            for j in 0..k {
+                map[1 + j] = (j, 1.0);
+                map[1 + k + 2 * j] = (k + j, ax.a);
+                map[2 + k + 2 * j] = (k + j, ax.b);
+            }
+            map[1 + 3 * k] = (2 * k, 1.0);
+            let g = |x: usize, y: usize| s.g[x.min(y)][x.max(y)];
+            rss += -2.0 * (s.y[m] - self.y0 * s.e[m]) + 2.0 * ac * s.e[m] + g(m, m);
+            jtr[0] -= s.e[m];
+            for pi in 1..np {
+                let (x, f) = map[pi];
+                jtj[(0, pi)] += f * s.e[x];
+                jtr[pi] += f * (s.y[x] - a * s.e[x] - g(x, m));
+                for pj in pi..np {
+                    let (y, h) = map[pj];
+                    jtj[(pi, pj)] += f * h * g(x, y);
+                }
+            }
+        }
+        for i in 0..np {
+            for j in 0..i {
+                jtj[(i, j)] = jtj[(j, i)];
+            }
+        }
+        Normal {
+            rss: if data { rss.max(0.0) } else { f64::NAN },
+            jtj,
+            jtr,
+        }
+    }
+}
+
+impl Samples for CompactSamples<'_> {
+    fn count(&self) -> usize {
+        self.n as usize
+    }
+
+    fn normal(&self, p: &Params) -> Normal {
+        self.normal_with(p, true)
+    }
+
+    fn information(&self, p: &Params) -> DMatrix<f64> {
+        self.normal_with(p, false).jtj
+    }
+
+    fn linear(&self, p: &Params, dir: Option<usize>) -> (Params, f64) {
+        let k = p.k;
+        let n = 1 + k;
+        let mut out = *p;
+        if !self.inside(p, 0.0, dir) {
+            return (out, f64::INFINITY);
+        }
+        let mut g = DMatrix::<f64>::zeros(n, n);
+        let mut h = DVector::<f64>::zeros(n);
+        let mut yy = 0.0;
+        for d in 0..self.dirs.len() {
+            if dir.is_some_and(|x| x != d) {
+                continue;
+            }
+            let pd = &self.dirs[d];
+            let s = self.dir_sums(d, p, false, true);
+            g[(0, 0)] += pd.n;
+            h[0] += pd.sy;
+            yy += pd.syy;
+            for x in 0..k {
+                g[(0, 1 + x)] += s.e[x];
+                h[1 + x] += s.y[x] - self.y0 * s.e[x];
+                for y in x..k {
+                    g[(1 + x, 1 + y)] += s.g[x][y];
+                }
+            }
+        }
+        for i in 0..n {
+            for j in 0..i {
+                g[(i, j)] = g[(j, i)];
+            }
+        }
+        let mut rss = f64::INFINITY;
+        if let Some(sol) = g.cholesky().map(|c| c.solve(&h)) {
+            out.offset = sol[0] + self.y0;
+            out.amp[..k].copy_from_slice(&sol.as_slice()[1..n]);
+            rss = (yy - h.dot(&sol)).max(0.0);
+        }
+        (out, rss)
+    }
+
+    fn peak(&self, d: usize) -> Option<(f64, f64)> {
+        let pd = &self.dirs[d];
+        let t = &self.tables.dirs[d];
+        if pd.n < 8.0 {
+            return None;
+        }
+        let mean = pd.sy / pd.n;
+        let var = pd.syy / pd.n - mean * mean;
+        let mean = mean + self.y0;
+        // Counts are integers: no variance below the rounding's 1/12 count²
+        // (also keeps Σy²/n − ȳ²'s cancellation on a constant pixel from
+        // passing for a signal).
+        let var = var.max(1.0 / 12.0);
+        let zc: Vec<C64> = pd
+            .z
+            .iter()
+            .zip(&pd.ez_data)
+            .map(|(z, e)| z - e * mean)
+            .collect();
+        let q = zc.len();
+        let power: Vec<f64> = t
+            .pw
+            .chunks_exact(q)
+            .map(|w| w.iter().zip(&zc).map(|(a, b)| a * b).sum::<C64>().norm_sqr())
+            .collect();
+        let mus: Vec<f64> = t.pdelta.iter().map(|dl| pd.mu_c + dl).collect();
+        let (k, _) = power
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))?;
+        if k == 0 || k + 1 == power.len() {
+            // The strongest power is at the band's edge: the signal may be
+            // outside it.
+            return None;
+        }
+        let (mu, _) = refine_peak(&mus, &power, 3.0 * t.bin)?;
+        // Pure noise of variance σ² has periodogram power with mean
+        // σ² Σ w², median ln 2 of that: the ratio is on the scale of
+        // [`super::pixel::DETECTION_RATIO`].
+        let ratio = power[k] / (std::f64::consts::LN_2 * var * t.w2);
+        Some((mu, ratio))
+    }
+
+    fn within_band(&self, p: &Params) -> bool {
+        let [klo, khi] = self.tables.kappa_range;
+        // A quarter bin inside the band and 10 % inside the κ range: a fit
+        // stopped at the edge by the bounds is not reported.
+        p.kappa > 0.9 * klo && p.kappa < 0.9 * khi && self.inside(p, 0.25 + 0.5 * GRID_BINS, None)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::patterns::FringeAxis;
+    use crate::spectral::init::SpectrumPlans;
+    use crate::spectral::model::{Axis, FrameMeta, SeriesSamples};
+
+    /// The paper's schedule (±45°, τ = 0.2…200) on a 1600×1200 screen, with
+    /// a phase shift on every other τ so that the phases are exercised.
+    fn design() -> Design {
+        let dirs = [45.0, -45.0];
+        let mut frames = Vec::new();
+        for (d, _) in dirs.iter().enumerate() {
+            for k in 0..1000 {
+                frames.push(FrameMeta {
+                    tau: 0.2 * (k + 1) as f64,
+                    phase_cycles: if k % 2 == 0 { 0.0 } else { 0.25 },
+                    dir: d,
+                });
+            }
+        }
+        Design {
+            frames,
+            axes: dirs
+                .iter()
+                .map(|&a| Axis::from_fringe(&FringeAxis::new(a, 1600, 1200)))
+                .collect(),
+            directions_deg: dirs.to_vec(),
+        }
+    }
+
+    fn truth() -> Params {
+        Params {
+            k: 2,
+            offset: 1800.0,
+            amp: [900.0, 700.0, 0.0],
+            uv: [[800.3, 600.7], [808.9, 603.1], [0.0; 2]],
+            kappa: 1.3 / 200.0f64.powi(2),
+        }
+    }
+
+    /// Counts of the model at `p` plus a deterministic ±`noise` pattern;
+    /// every 97th sample clipped to 4095.
+    fn series(design: &Design, p: &Params, noise: f64) -> Vec<u16> {
+        design
+            .frames
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                if i % 97 == 5 {
+                    return 4095;
+                }
+                let ax = design.axes[f.dir];
+                let e = (-p.kappa * f.tau * f.tau).exp();
+                let mut v = p.offset;
+                for j in 0..p.k {
+                    let x = f.tau * ax.s(p.uv[j][0], p.uv[j][1]) + f.phase_cycles;
+                    v += e * p.amp[j] * (std::f64::consts::TAU * x).cos();
+                }
+                let n = noise * ((i as f64 * 12.9898).sin() * 43758.5453).fract();
+                (v + n).round().clamp(0.0, 4095.0) as u16
+            })
+            .collect()
+    }
+
+    /// The statistics give the series' RSS, JᵀJ and Jᵀr (to the node
+    /// tolerance; relative 1e-8 leaves room for the sums' rounding), with
+    /// clipped samples left out of both, at the truth and away from it.
+    #[test]
+    fn statistics_reproduce_the_series_normal_equations() {
+        let design = design();
+        let plans = SpectrumPlans::new(&design);
+        let t = truth();
+        let raw = series(&design, &t, 40.0);
+        let centres: Vec<Vec<f64>> = design
+            .axes
+            .iter()
+            .map(|ax| vec![0.5 * (ax.s(800.0, 600.0) + ax.s(809.0, 603.0))])
+            .collect();
+        let band: Vec<f64> = vec![3.0 / 199.8; 2];
+        let k0 = 200.0f64.powi(-2);
+        let mut stats = CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None);
+        for (r, chunk) in raw.chunks(STATS_BLOCK).enumerate() {
+            stats.ingest(r * STATS_BLOCK, chunk.len(), chunk);
+        }
+        stats.seal();
+        let (compact, excluded) = stats.samples(&design, 0, Some(4095)).unwrap();
+        let y: Vec<f64> = raw
+            .iter()
+            .map(|&v| if v >= 4095 { f64::NAN } else { f64::from(v) })
+            .collect();
+        let series = SeriesSamples::new(&design, &plans, &y, k0);
+        assert_eq!(excluded, raw.iter().filter(|&&v| v >= 4095).count());
+        assert_eq!(compact.count(), series.count());
+        let mut off = t;
+        off.uv[0][0] += 3.0;
+        off.uv[1][1] -= 2.0;
+        off.kappa *= 1.7;
+        off.amp[1] *= 0.8;
+        let mut one = t;
+        one.k = 1;
+        for p in [t, off, one] {
+            let a = series.normal(&p);
+            let b = compact.normal(&p);
+            let scale = a.jtj.abs().max();
+            assert!((a.rss - b.rss).abs() <= 1e-8 * a.rss, "rss {} vs {}", a.rss, b.rss);
+            let dj = (&a.jtj - &b.jtj).abs().max();
+            assert!(dj <= 1e-8 * scale, "JᵀJ differs by {dj} of {scale}\n{}\n{}", a.jtj, b.jtj);
+            let dr = (&a.jtr - &b.jtr).abs().max();
+            let rscale = a.jtr.abs().max().max(scale.sqrt() * a.rss.sqrt());
+            assert!(dr <= 1e-8 * rscale, "Jᵀr differs by {dr} of {rscale}\n{}\n{}", a.jtr, b.jtr);
+            for dir in [None, Some(0), Some(1)] {
+                let (pa, ra) = series.linear(&p, dir);
+                let (pb, rb) = compact.linear(&p, dir);
+                assert!((ra - rb).abs() <= 1e-8 * ra.max(1.0), "{dir:?}: {ra} vs {rb}");
+                assert!((pa.offset - pb.offset).abs() < 1e-6, "{dir:?}");
+            }
+        }
+        for d in 0..2 {
+            let (ma, _) = series.peak(d).unwrap();
+            let (mb, rb) = compact.peak(d).unwrap();
+            assert!((ma - mb).abs() < 0.3 / 199.8, "{d}: {ma} vs {mb}");
+            // Far above the detection threshold (a strong, clean signal).
+            assert!(rb > 100.0, "{rb}");
+        }
+    }
+}
