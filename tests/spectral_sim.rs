@@ -178,7 +178,12 @@ fn paper_schedule() -> Schedule {
 }
 
 fn noise_free_is_exact_and_complete(engine: Engine) {
-    let r = run(&station(10.0), SimParams::default(), &paper_schedule(), engine);
+    let r = run(
+        &station(10.0),
+        SimParams::default(),
+        &paper_schedule(),
+        engine,
+    );
     for (k, (rms, _, worst, found, expected)) in score(&r).into_iter().enumerate() {
         eprintln!(
             "noise-free S{}: RMS {rms:.2e} px, worst {worst:.2e} px, found {found}/{expected}",
@@ -511,8 +516,18 @@ fn the_statistics_give_the_series_answers() {
         seed: 3,
         ..SimParams::default()
     };
-    let a = run(&station(10.0), params.clone(), &paper_schedule(), Engine::Series);
-    let b = run(&station(10.0), params, &paper_schedule(), Engine::Statistics);
+    let a = run(
+        &station(10.0),
+        params.clone(),
+        &paper_schedule(),
+        Engine::Series,
+    );
+    let b = run(
+        &station(10.0),
+        params,
+        &paper_schedule(),
+        Engine::Statistics,
+    );
     let (mut worst, mut compared, mut differ) = (0.0f64, 0, 0);
     for (p, q) in a.maps.pixels.iter().zip(&b.maps.pixels) {
         if p.flags != q.flags {
@@ -534,4 +549,67 @@ fn the_statistics_give_the_series_answers() {
     assert!(compared > 2000, "{compared}");
     assert!(worst <= 0.05, "{worst} σ");
     assert!(differ * 200 <= a.maps.pixels.len(), "{differ} pixels");
+}
+
+#[test]
+fn statistics_flag_points_outside_their_band_never_guess() {
+    // The frames are rendered with the screen 22.7 mm (84 screen px) to the
+    // left of where the solver's station file puts it: every screen point
+    // sits 84 px ≈ 6 Fourier bins (14 px per bin along each diagonal on
+    // this screen) from its prediction, beyond the default band of 3 bins
+    // past the predicted pair. The statistics engine must say so, not fit a
+    // sidelobe; with a band of 8 bins it finds the points.
+    let nominal = station(10.0);
+    let mut shifted = nominal.clone();
+    shifted.screen.origin_mm -= shifted.screen.u_axis.into_inner() * 22.7;
+    let (front, back) = RandomSurfaceSpec::default()
+        .draw_pair(25.5, [0.0, 0.0], 21)
+        .unwrap();
+    let view = TracedView::trace(&shifted, &Plate::new(&shifted, front, back, 3.0));
+    let patterns = paper_schedule().patterns();
+    let mut counts = Vec::new();
+    for band_bins in [3.0, 8.0] {
+        let cfg = SpectralConfig {
+            band_bins,
+            ..config(Engine::Statistics)
+        };
+        // The solver renders with `shifted` but predicts with `nominal`.
+        let mut cam = SimCamera::new(&view, &shifted.screen, SimParams::default()).unwrap();
+        let frames: Vec<_> = FrameInfo::from_patterns(&patterns);
+        let mut solver = SpectralSolver::new(&nominal, &frames, cfg).unwrap();
+        let mut buf = vec![0u16; nominal.camera.pixel_count()];
+        for (k, p) in patterns.iter().enumerate() {
+            cam.render(p, k as u64, &mut buf);
+            solver.push_frame(k, &buf).unwrap();
+        }
+        let maps = solver.solve().unwrap();
+        let (mut total, mut out_of_band, mut found, mut worst) = (0, 0, 0, 0.0f64);
+        for (q, px) in view.pixels.iter().enumerate() {
+            let (Ok(f), Ok(b)) = (px.front, px.back) else {
+                continue;
+            };
+            let m = &maps.pixels[q];
+            total += 1;
+            if m.flags & flags::OUT_OF_BAND != 0 {
+                out_of_band += 1;
+            }
+            for (k, t) in [f, b].iter().enumerate() {
+                if m.s[k][0].is_finite() {
+                    worst = worst.max((m.s[k][0] - t.u).hypot(m.s[k][1] - t.v));
+                    found += 1;
+                }
+            }
+        }
+        eprintln!(
+            "band {band_bins} bins: {out_of_band}/{total} flagged out of band, {found} points reported, worst error {worst:.2e} px"
+        );
+        counts.push((total, out_of_band, found, worst));
+    }
+    let (total, out_of_band, _, worst) = counts[0];
+    // Noise-free: any reported point is exact (0.01 px) or it is a guess.
+    assert!(worst <= 0.01, "a guess {worst} px off");
+    assert!(out_of_band * 10 >= total * 9, "{out_of_band}/{total}");
+    let (total, _, found, worst) = counts[1];
+    assert!(worst <= 0.01, "{worst}");
+    assert!(found as f64 >= 0.99 * 2.0 * total as f64, "{found}/{total}");
 }

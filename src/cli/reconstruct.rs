@@ -40,7 +40,8 @@ pub struct ReconstructArgs {
     /// chosen, 0–3), flags.npy (u16 bits: 1 no data, 2 no fringe signal,
     /// 4 saturated samples excluded, 8 one reflection, 16 three reflections,
     /// 32 reflections not separable, 64 offset disagrees with the geometry,
-    /// 128 not converged, 256 negative amplitude).
+    /// 128 not converged, 256 negative amplitude, 512 outside the band the
+    /// statistics engine keeps).
     #[arg(long)]
     out: PathBuf,
     /// Station file; default: the one the acquisition names.
@@ -66,6 +67,17 @@ pub struct ReconstructArgs {
     /// Only this region of camera pixels: x0,y0,x1,y1 (columns x0..x1, rows y0..y1).
     #[arg(long, value_delimiter = ',')]
     roi: Option<Vec<u32>>,
+    /// How the spectral stage keeps the pixels' data until the fit: series
+    /// (every sample, 2 bytes per pixel and frame; points anywhere on the
+    /// screen), statistics (~1.5 kB per pixel whatever the frame count,
+    /// points within --band-bins of the station's prediction), or auto
+    /// (statistics when the series would exceed 2 GiB).
+    #[arg(long, default_value = "auto")]
+    engine: String,
+    /// Statistics engine: how many Fourier bins beyond the predicted screen
+    /// points (per direction) the kept band reaches.
+    #[arg(long, default_value_t = 3.0)]
+    band_bins: f64,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
 }
@@ -95,6 +107,8 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         margin_px: args.margin_px,
         edge_margin_mm: args.edge_margin_mm,
         roi: args.roi.as_ref().map(|r| [r[0], r[1], r[2], r[3]]),
+        engine: super::parse_engine(&args.engine)?,
+        band_bins: args.band_bins,
         ..SpectralConfig::default()
     };
     let t0 = Instant::now();

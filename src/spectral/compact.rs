@@ -73,12 +73,7 @@ impl Nodes {
                 tq[j * q + k] = (k as f64 * th).cos();
             }
         }
-        Nodes {
-            tau,
-            tq,
-            mid,
-            half,
-        }
+        Nodes { tau, tq, mid, half }
     }
 
     fn len(&self) -> usize {
@@ -730,21 +725,32 @@ impl CompactSamples<'_> {
         if !(p.kappa >= klo && p.kappa <= khi) {
             return false;
         }
-        self.dirs.iter().zip(&self.tables.dirs).enumerate().all(|(d, (pd, t))| {
-            if dir.is_some_and(|x| x != d) {
-                return true;
-            }
-            let ax = self.design.axes[d];
-            p.uv[..p.k].iter().all(|uv| {
-                (ax.s(uv[0], uv[1]) - pd.mu_c).abs() <= t.band + (0.5 * GRID_BINS - margin_bins) * t.bin
+        self.dirs
+            .iter()
+            .zip(&self.tables.dirs)
+            .enumerate()
+            .all(|(d, (pd, t))| {
+                if dir.is_some_and(|x| x != d) {
+                    return true;
+                }
+                let ax = self.design.axes[d];
+                p.uv[..p.k].iter().all(|uv| {
+                    (ax.s(uv[0], uv[1]) - pd.mu_c).abs()
+                        <= t.band + (0.5 * GRID_BINS - margin_bins) * t.bin
+                })
             })
-        })
     }
 
     /// Columns at τ for `p`, `nx` of them: `a_k`; with derivatives also
     /// `β_k = 2πiτ B_k a_k` and `−τ² m`; last the model `m = Σ B_k a_k`.
     #[inline]
-    fn columns(p: &Params, delta: &[f64; MAX_REFLECTIONS], derivs: bool, t: f64, out: &mut [C64; NX]) {
+    fn columns(
+        p: &Params,
+        delta: &[f64; MAX_REFLECTIONS],
+        derivs: bool,
+        t: f64,
+        out: &mut [C64; NX],
+    ) {
         let k = p.k;
         let e = (-p.kappa * t * t).exp();
         let mut m = C64::new(0.0, 0.0);
@@ -771,8 +777,8 @@ impl CompactSamples<'_> {
         let t = &self.tables.dirs[d];
         let ax = self.design.axes[d];
         let mut delta = [0.0; MAX_REFLECTIONS];
-        for j in 0..p.k {
-            delta[j] = ax.s(p.uv[j][0], p.uv[j][1]) - pd.mu_c;
+        for (dl, uv) in delta.iter_mut().zip(&p.uv[..p.k]) {
+            *dl = ax.s(uv[0], uv[1]) - pd.mu_c;
         }
         let nx = if derivs { 2 * p.k + 2 } else { p.k + 1 };
         let mut out = DirSums {
@@ -786,15 +792,13 @@ impl CompactSamples<'_> {
             let hm = 0.5 * pd.mz[j];
             let hd = 0.5 * pd.dz[j];
             let ez = pd.ez_gram[j];
-            for x in 0..nx {
-                let cx = col[x];
+            for (x, cx) in col[..nx].iter().enumerate() {
                 out.e[x] += ez.re * cx.re - ez.im * cx.im;
                 // ½Re(M a b̄) + ½Re(D a b), M real.
                 let (dr, di) = (hd.re * cx.re - hd.im * cx.im, hd.re * cx.im + hd.im * cx.re);
                 let (mr, mi) = (hm * cx.re, hm * cx.im);
-                for y in x..nx {
-                    let cy = col[y];
-                    out.g[x][y] += mr * cy.re + mi * cy.im + dr * cy.re - di * cy.im;
+                for (g, cy) in out.g[x][x..nx].iter_mut().zip(&col[x..nx]) {
+                    *g += mr * cy.re + mi * cy.im + dr * cy.re - di * cy.im;
                 }
             }
         }
@@ -802,8 +806,8 @@ impl CompactSamples<'_> {
             for (j, &tau) in t.data.tau.iter().enumerate() {
                 Self::columns(p, &delta, derivs, tau, &mut col);
                 let z = pd.z[j];
-                for x in 0..nx {
-                    out.y[x] += z.re * col[x].re - z.im * col[x].im;
+                for (y, c) in out.y[..nx].iter_mut().zip(&col[..nx]) {
+                    *y += z.re * c.re - z.im * c.im;
                 }
             }
         }
@@ -933,33 +937,34 @@ impl Samples for CompactSamples<'_> {
         // (also keeps Σy²/n − ȳ²'s cancellation on a constant pixel from
         // passing for a signal).
         let var = var.max(1.0 / 12.0);
-        let zc: Vec<C64> = pd
-            .z
-            .iter()
-            .zip(&pd.ez_data)
-            .map(|(z, e)| z - e * mean)
-            .collect();
+        let zc: Vec<C64> =
+            pd.z.iter()
+                .zip(&pd.ez_data)
+                .map(|(z, e)| z - e * mean)
+                .collect();
         let q = zc.len();
-        let power: Vec<f64> = t
-            .pw
-            .chunks_exact(q)
-            .map(|w| w.iter().zip(&zc).map(|(a, b)| a * b).sum::<C64>().norm_sqr())
-            .collect();
+        let power: Vec<f64> =
+            t.pw.chunks_exact(q)
+                .map(|w| {
+                    w.iter()
+                        .zip(&zc)
+                        .map(|(a, b)| a * b)
+                        .sum::<C64>()
+                        .norm_sqr()
+                })
+                .collect();
         let mus: Vec<f64> = t.pdelta.iter().map(|dl| pd.mu_c + dl).collect();
-        let (k, _) = power
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))?;
-        if k == 0 || k + 1 == power.len() {
-            // The strongest power is at the band's edge: the signal may be
-            // outside it.
-            return None;
-        }
-        let (mu, _) = refine_peak(&mus, &power, 3.0 * t.bin)?;
+        let (k, _) = power.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
         // Pure noise of variance σ² has periodogram power with mean
         // σ² Σ w², median ln 2 of that: the ratio is on the scale of
         // [`super::pixel::DETECTION_RATIO`].
         let ratio = power[k] / (std::f64::consts::LN_2 * var * t.w2);
+        if k == 0 || k + 1 == power.len() {
+            // The strongest power is at the band's edge: the signal may lie
+            // outside it.
+            return Some((f64::NAN, ratio));
+        }
+        let (mu, _) = refine_peak(&mus, &power, 3.0 * t.bin)?;
         Some((mu, ratio))
     }
 
@@ -968,6 +973,10 @@ impl Samples for CompactSamples<'_> {
         // A quarter bin inside the band and 10 % inside the κ range: a fit
         // stopped at the edge by the bounds is not reported.
         p.kappa > 0.9 * klo && p.kappa < 0.9 * khi && self.inside(p, 0.25 + 0.5 * GRID_BINS, None)
+    }
+
+    fn band_limited(&self) -> bool {
+        true
     }
 }
 
@@ -1076,16 +1085,34 @@ mod tests {
             let a = series.normal(&p);
             let b = compact.normal(&p);
             let scale = a.jtj.abs().max();
-            assert!((a.rss - b.rss).abs() <= 1e-8 * a.rss, "rss {} vs {}", a.rss, b.rss);
+            assert!(
+                (a.rss - b.rss).abs() <= 1e-8 * a.rss,
+                "rss {} vs {}",
+                a.rss,
+                b.rss
+            );
             let dj = (&a.jtj - &b.jtj).abs().max();
-            assert!(dj <= 1e-8 * scale, "JᵀJ differs by {dj} of {scale}\n{}\n{}", a.jtj, b.jtj);
+            assert!(
+                dj <= 1e-8 * scale,
+                "JᵀJ differs by {dj} of {scale}\n{}\n{}",
+                a.jtj,
+                b.jtj
+            );
             let dr = (&a.jtr - &b.jtr).abs().max();
             let rscale = a.jtr.abs().max().max(scale.sqrt() * a.rss.sqrt());
-            assert!(dr <= 1e-8 * rscale, "Jᵀr differs by {dr} of {rscale}\n{}\n{}", a.jtr, b.jtr);
+            assert!(
+                dr <= 1e-8 * rscale,
+                "Jᵀr differs by {dr} of {rscale}\n{}\n{}",
+                a.jtr,
+                b.jtr
+            );
             for dir in [None, Some(0), Some(1)] {
                 let (pa, ra) = series.linear(&p, dir);
                 let (pb, rb) = compact.linear(&p, dir);
-                assert!((ra - rb).abs() <= 1e-8 * ra.max(1.0), "{dir:?}: {ra} vs {rb}");
+                assert!(
+                    (ra - rb).abs() <= 1e-8 * ra.max(1.0),
+                    "{dir:?}: {ra} vs {rb}"
+                );
                 assert!((pa.offset - pb.offset).abs() < 1e-6, "{dir:?}");
             }
         }

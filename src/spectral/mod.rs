@@ -49,8 +49,9 @@ pub mod flags {
     pub const NOT_CONVERGED: u16 = 128;
     /// Every model needed a negative amplitude: no physical fit.
     pub const NEGATIVE_AMPLITUDE: u16 = 256;
-    /// The fit left the band of screen positions (around the station's
-    /// prediction) that the streaming statistics keep: both NaN.
+    /// Statistics engine: the fit left the band of screen positions around
+    /// the station's prediction that the statistics keep, or (with
+    /// [`NO_SIGNAL`]) the band holds no signal — it may lie outside: both NaN.
     pub const OUT_OF_BAND: u16 = 512;
 }
 

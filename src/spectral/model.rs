@@ -192,12 +192,18 @@ pub trait Samples {
     /// over direction `dir`'s samples alone when given; with the RSS.
     fn linear(&self, p: &Params, dir: Option<usize>) -> (Params, f64);
     /// Strongest periodogram peak of direction `d` and its power over the
-    /// noise's median power: `(μ, ratio)`.
+    /// noise's median power: `(μ, ratio)`; μ is NaN when the peak lies at
+    /// the edge of the band the samples describe.
     fn peak(&self, d: usize) -> Option<(f64, f64)>;
     /// Whether the samples describe the model at `p` (statistics hold only
     /// within a band around the station's prediction; a series everywhere).
     fn within_band(&self, _p: &Params) -> bool {
         true
+    }
+    /// Whether the samples describe only a band of screen positions (a
+    /// signal they do not show may lie outside it).
+    fn band_limited(&self) -> bool {
+        false
     }
 }
 

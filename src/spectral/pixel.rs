@@ -7,7 +7,9 @@
 use nalgebra::DMatrix;
 
 use super::init::SpectrumPlans;
-use super::model::{levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples, MAX_REFLECTIONS};
+use super::model::{
+    levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples, MAX_REFLECTIONS,
+};
 use super::{flags, PixelResult};
 use crate::trace::PixelPaths;
 
@@ -98,10 +100,7 @@ fn pair_start<S: Samples + ?Sized>(
         for k in 0..=12 {
             let t = -1.25 + 0.125 * f64::from(k);
             let m = [mus[dir] + t * delta, mus[dir] + (t + 1.0) * delta];
-            let (p, rss) = data.linear(
-                &start(2, &[point(m[0]), point(m[1])], kappa),
-                Some(dir),
-            );
+            let (p, rss) = data.linear(&start(2, &[point(m[0]), point(m[1])], kappa), Some(dir));
             if p.amp[0] > 0.0 && p.amp[1] > 0.0 && rss < best.0 {
                 best = (rss, m);
             }
@@ -123,10 +122,7 @@ struct Candidate {
 fn fit_from<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, starts: &[Params]) -> Candidate {
     // The best start with physical (positive) amplitudes; a start whose
     // linear fit needs a negative one sits in an unphysical basin.
-    let scored: Vec<(Params, f64)> = starts
-        .iter()
-        .map(|s| data.linear(s, None))
-        .collect();
+    let scored: Vec<(Params, f64)> = starts.iter().map(|s| data.linear(s, None)).collect();
     let positive = |p: &Params| p.amp[..p.k].iter().all(|&b| b > 0.0);
     let (best_start, _) = scored
         .iter()
@@ -180,7 +176,11 @@ pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> Pix
 }
 
 /// [`fit_pixel`] on any form of the pixel's samples.
-pub fn fit_samples<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, excluded: usize) -> PixelFits {
+pub fn fit_samples<S: Samples + ?Sized>(
+    ctx: &PixelContext,
+    data: &S,
+    excluded: usize,
+) -> PixelFits {
     let mut out = PixelFits {
         per_model: [None; MAX_REFLECTIONS],
         base: PixelResult::empty(),
@@ -195,9 +195,17 @@ pub fn fit_samples<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, excluded: 
     let mut mus = Vec::new();
     for d in 0..ctx.design.axes.len() {
         match data.peak(d) {
+            Some((mu, ratio)) if ratio >= DETECTION_RATIO && mu.is_nan() => {
+                out.base.flags |= flags::OUT_OF_BAND;
+                return out;
+            }
             Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(mu),
             _ => {
                 out.base.flags |= flags::NO_SIGNAL;
+                if data.band_limited() {
+                    // No signal within the band: it may lie outside.
+                    out.base.flags |= flags::OUT_OF_BAND;
+                }
                 return out;
             }
         }
@@ -377,9 +385,11 @@ fn expected_separation_std<S: Samples + ?Sized>(
     p.offset = fitted.offset;
     p.amp[0] = amp * (1.0 - w);
     p.amp[1] = amp * w;
-    data.information(&p).try_inverse().map_or(f64::INFINITY, |inv| {
-        separation_std(&(inv * sigma2), &p, 0, 1)
-    })
+    data.information(&p)
+        .try_inverse()
+        .map_or(f64::INFINITY, |inv| {
+            separation_std(&(inv * sigma2), &p, 0, 1)
+        })
 }
 
 /// Smallest separation over the directions, in Fourier bins, of two screen

@@ -31,6 +31,14 @@ pub enum SpectralError {
         /// What is wrong.
         problem: String,
     },
+    /// A setting is out of range.
+    #[error("spectral setting {field}: {problem}")]
+    Config {
+        /// The setting.
+        field: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
     /// A fit backend broke its contract.
     #[error("fit backend: {problem}")]
     Backend {
@@ -177,6 +185,15 @@ impl SpectralSolver {
             Engine::Statistics => true,
             Engine::Auto => series_bytes > SERIES_LIMIT_BYTES,
         };
+        if use_stats && !(config.band_bins.is_finite() && config.band_bins > 0.0) {
+            return Err(SpectralError::Config {
+                field: "band_bins",
+                problem: format!(
+                    "expected a number of Fourier bins > 0, found {}",
+                    config.band_bins
+                ),
+            });
+        }
         let stats = use_stats.then(|| {
             let kappa0 = kappa_start(&config, &design);
             let (centres, band) = band_centres(&design, &prior, &candidates, &config, &plans);
@@ -695,7 +712,14 @@ fn band_centres(
             pts = (1..=i64::from(config.margin_px))
                 .find_map(|r| {
                     (-r..=r)
-                        .flat_map(|d| [(x + d, y - r), (x + d, y + r), (x - r, y + d), (x + r, y + d)])
+                        .flat_map(|d| {
+                            [
+                                (x + d, y - r),
+                                (x + d, y + r),
+                                (x - r, y + d),
+                                (x + r, y + d),
+                            ]
+                        })
                         .filter(|&(i, j)| (0..w).contains(&i) && (0..h).contains(&j))
                         .map(|(i, j)| points((j * w + i) as usize, None))
                         .find(|p| !p.is_empty())
