@@ -155,6 +155,10 @@ struct DirTables {
     /// Cardinals of every frame of the direction (by position), row-major.
     card_data: Vec<f64>,
     card_gram: Vec<f64>,
+    /// `L^gram_k(τ^data_j)`, row j: lifts data-node sums onto the product
+    /// nodes (`Σ_j Z_j f(τ^data_j) = Σ_k Z'_k f(τ^gram_k)` for the smooth f
+    /// both node sets hold), so one evaluation of the columns serves both.
+    lift: Vec<f64>,
     /// M: Σ_i L_j(τ_i) over the direction's frames (gram nodes).
     mz: Vec<f64>,
     /// Grid step of the centres (μ), first grid index, count.
@@ -224,6 +228,10 @@ impl CompactTables {
                     data.cardinal(t, &mut card_data[k * qd..(k + 1) * qd]);
                     gram.cardinal(t, &mut card_gram[k * qg..(k + 1) * qg]);
                 }
+                let mut lift = vec![0.0; qd * qg];
+                for (j, &t) in data.tau.iter().enumerate() {
+                    gram.cardinal(t, &mut lift[j * qg..(j + 1) * qg]);
+                }
                 let mut mz = vec![0.0; qg];
                 for row in card_gram.chunks(qg) {
                     for (m, &c) in mz.iter_mut().zip(row) {
@@ -290,6 +298,7 @@ impl CompactTables {
                     gram,
                     card_data,
                     card_gram,
+                    lift,
                     mz,
                     step,
                     g0,
@@ -616,6 +625,7 @@ impl CompactStats {
                         .chunks_exact(2)
                         .map(|c| C64::new(c[0], c[1]))
                         .collect(),
+                    zg: Vec::new(),
                     ez_data: t.ez_data[g * q..(g + 1) * q].to_vec(),
                     ez_gram: t.ez_gram[g * qg..(g + 1) * qg].to_vec(),
                     dz: t.dz[g * qg..(g + 1) * qg].to_vec(),
@@ -660,6 +670,16 @@ impl CompactStats {
                 pd.n += 1.0;
             }
         }
+        for (pd, t) in dirs.iter_mut().zip(&self.tables.dirs) {
+            let qg = t.gram.len();
+            let mut zg = vec![C64::new(0.0, 0.0); qg];
+            for (z, row) in pd.z.iter().zip(t.lift.chunks_exact(qg)) {
+                for (o, &l) in zg.iter_mut().zip(row) {
+                    *o += z * l;
+                }
+            }
+            pd.zg = zg;
+        }
         let n = dirs.iter().map(|d| d.n).sum();
         let sy = dirs.iter().map(|d| d.sy).sum();
         let syy = dirs.iter().map(|d| d.syy).sum();
@@ -683,6 +703,8 @@ impl CompactStats {
 struct PixelDir {
     mu_c: f64,
     z: Vec<C64>,
+    /// Z lifted onto the product nodes.
+    zg: Vec<C64>,
     ez_data: Vec<C64>,
     ez_gram: Vec<C64>,
     dz: Vec<C64>,
@@ -794,18 +816,16 @@ impl CompactSamples<'_> {
             let ez = pd.ez_gram[j];
             for (x, cx) in col[..nx].iter().enumerate() {
                 out.e[x] += ez.re * cx.re - ez.im * cx.im;
-                // ½Re(M a b̄) + ½Re(D a b), M real.
-                let (dr, di) = (hd.re * cx.re - hd.im * cx.im, hd.re * cx.im + hd.im * cx.re);
-                let (mr, mi) = (hm * cx.re, hm * cx.im);
+                // ½Re(M a b̄) + ½Re(D a b) (M real) = pr·b.re + pi·b.im
+                // with pr + i·pi = ½M a + conj(½D a).
+                let pr = hm * cx.re + hd.re * cx.re - hd.im * cx.im;
+                let pi = hm * cx.im - hd.re * cx.im - hd.im * cx.re;
                 for (g, cy) in out.g[x][x..nx].iter_mut().zip(&col[x..nx]) {
-                    *g += mr * cy.re + mi * cy.im + dr * cy.re - di * cy.im;
+                    *g += pr * cy.re + pi * cy.im;
                 }
             }
-        }
-        if data {
-            for (j, &tau) in t.data.tau.iter().enumerate() {
-                Self::columns(p, &delta, derivs, tau, &mut col);
-                let z = pd.z[j];
+            if data {
+                let z = pd.zg[j];
                 for (y, c) in out.y[..nx].iter_mut().zip(&col[..nx]) {
                     *y += z.re * c.re - z.im * c.im;
                 }
@@ -978,6 +998,96 @@ impl Samples for CompactSamples<'_> {
     fn band_limited(&self) -> bool {
         true
     }
+
+    fn pair_scan(
+        &self,
+        dir: usize,
+        [mu0, step, offset]: [f64; 3],
+        count: usize,
+        kappa: f64,
+        _point: &dyn Fn(f64) -> [f64; 2],
+    ) -> Vec<([f64; 2], f64)> {
+        // The pairs' columns at node τ: a0 = e ρ0 r^k, a1 = a0 o, with
+        // e = e^{−κτ²}, ρ0 = e^{2πi(μ0 − μc)τ}, r = e^{2πi·step·τ},
+        // o = e^{2πi·offset·τ}: one complex product per pair and node
+        // instead of two sine–cosines and an exponential. The M part of the
+        // products is the same for every pair: ½Σ M e² (|a|²) and
+        // ½Σ M e² cos(2π·offset·τ) (Re a0 ā1).
+        let pd = &self.dirs[dir];
+        let t = &self.tables.dirs[dir];
+        let [klo, khi] = self.tables.kappa_range;
+        let lim = t.band + 0.5 * GRID_BINS * t.bin;
+        let cis = |x: f64| {
+            let (c, s) = sincos_cycles(x);
+            C64::new(c, s)
+        };
+        struct Node {
+            cur: C64,
+            cur2: C64,
+            rot: C64,
+            rot2: C64,
+            off: C64,
+        }
+        let node = |tau: f64| {
+            let e = (-kappa * tau * tau).exp();
+            let off = cis(offset * tau);
+            let cur = cis((mu0 - pd.mu_c) * tau) * e;
+            let rot = cis(step * tau);
+            Node {
+                cur,
+                cur2: cur * cur,
+                rot,
+                rot2: rot * rot,
+                off,
+            }
+        };
+        let mut gram: Vec<Node> = t.gram.tau.iter().map(|&tau| node(tau)).collect();
+        let (mut m00, mut m01) = (0.0, 0.0);
+        for (j, nd) in gram.iter().enumerate() {
+            let e2 = nd.cur.norm_sqr();
+            m00 += 0.5 * pd.mz[j] * e2;
+            m01 += 0.5 * pd.mz[j] * e2 * nd.off.re;
+        }
+        let mut out = Vec::with_capacity(count);
+        for k in 0..count {
+            let m0 = mu0 + k as f64 * step - pd.mu_c;
+            let inside =
+                kappa >= klo && kappa <= khi && m0.abs() <= lim && (m0 + offset).abs() <= lim;
+            let (mut e0, mut e1, mut g00, mut g01, mut g11) = (0.0, 0.0, m00, m01, m00);
+            let (mut y0, mut y1) = (0.0, 0.0);
+            for (j, nd) in gram.iter_mut().enumerate() {
+                let a0 = nd.cur;
+                let a1 = a0 * nd.off;
+                let ez = pd.ez_gram[j];
+                e0 += (ez * a0).re;
+                e1 += (ez * a1).re;
+                let z = pd.zg[j];
+                y0 += (z * a0).re;
+                y1 += (z * a1).re;
+                let w = pd.dz[j] * 0.5 * nd.cur2;
+                let wo = w * nd.off;
+                g00 += w.re;
+                g01 += wo.re;
+                g11 += (wo * nd.off).re;
+                nd.cur *= nd.rot;
+                nd.cur2 *= nd.rot2;
+            }
+            if !inside {
+                out.push(([0.0; 2], f64::INFINITY));
+                continue;
+            }
+            let g = nalgebra::Matrix3::new(pd.n, e0, e1, e0, g00, g01, e1, g01, g11);
+            let h = nalgebra::Vector3::new(pd.sy, y0 - self.y0 * e0, y1 - self.y0 * e1);
+            out.push(match g.cholesky() {
+                Some(c) => {
+                    let b = c.solve(&h);
+                    ([b[1], b[2]], (pd.syy - h.dot(&b)).max(0.0))
+                }
+                None => ([0.0; 2], f64::INFINITY),
+            });
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -1114,6 +1224,20 @@ mod tests {
                     "{dir:?}: {ra} vs {rb}"
                 );
                 assert!((pa.offset - pb.offset).abs() < 1e-6, "{dir:?}");
+            }
+        }
+        // The pair scan's recurrences give the direct linear fits.
+        for (d, ax) in design.axes.iter().enumerate() {
+            let n2 = ax.a * ax.a + ax.b * ax.b;
+            let point = |mu: f64| [(mu - ax.c) * ax.a / n2, (mu - ax.c) * ax.b / n2];
+            let mu = ax.s(t.uv[0][0], t.uv[0][1]);
+            let off = ax.s(t.uv[1][0], t.uv[1][1]) - mu;
+            let args = [mu - 1.25 * off, 0.125 * off, off];
+            let a = series.pair_scan(d, args, 13, k0, &point);
+            let b = compact.pair_scan(d, args, 13, k0, &point);
+            for ((aa, ra), (ab, rb)) in a.iter().zip(&b) {
+                assert!((ra - rb).abs() <= 1e-8 * ra, "{d}: {ra} vs {rb}");
+                assert!((aa[0] - ab[0]).abs() < 1e-6 && (aa[1] - ab[1]).abs() < 1e-6);
             }
         }
         for d in 0..2 {

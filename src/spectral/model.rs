@@ -200,6 +200,34 @@ pub trait Samples {
     fn within_band(&self, _p: &Params) -> bool {
         true
     }
+    /// The linear fits of [`Samples::linear`] on direction `dir` alone for
+    /// `count` pairs of points on that direction's axis: the first at
+    /// μ = `mu0 + k·step`, the second `offset` beyond, at κ = `kappa`;
+    /// `point(μ)` is a screen point with that axis coordinate. Per pair:
+    /// the amplitudes (B1, B2) and the RSS.
+    fn pair_scan(
+        &self,
+        dir: usize,
+        [mu0, step, offset]: [f64; 3],
+        count: usize,
+        kappa: f64,
+        point: &dyn Fn(f64) -> [f64; 2],
+    ) -> Vec<([f64; 2], f64)> {
+        (0..count)
+            .map(|k| {
+                let m0 = mu0 + k as f64 * step;
+                let p = Params {
+                    k: 2,
+                    offset: 0.0,
+                    amp: [0.0; MAX_REFLECTIONS],
+                    uv: [point(m0), point(m0 + offset), [0.0; 2]],
+                    kappa,
+                };
+                let (p, rss) = self.linear(&p, Some(dir));
+                ([p.amp[0], p.amp[1]], rss)
+            })
+            .collect()
+    }
     /// Whether the samples describe only a band of screen positions (a
     /// signal they do not show may lie outside it).
     fn band_limited(&self) -> bool {

@@ -97,11 +97,17 @@ fn pair_start<S: Samples + ?Sized>(
         // A screen point whose coordinate on this axis is μ (the other is free).
         let point = |mu: f64| [(mu - ax.c) * ax.a / norm2, (mu - ax.c) * ax.b / norm2];
         let mut best = (f64::INFINITY, [mus[dir], mus[dir] + delta]);
-        for k in 0..=12 {
-            let t = -1.25 + 0.125 * f64::from(k);
+        let scan = data.pair_scan(
+            dir,
+            [mus[dir] - 1.25 * delta, 0.125 * delta, delta],
+            13,
+            kappa,
+            &point,
+        );
+        for (k, (amp, rss)) in scan.into_iter().enumerate() {
+            let t = -1.25 + 0.125 * k as f64;
             let m = [mus[dir] + t * delta, mus[dir] + (t + 1.0) * delta];
-            let (p, rss) = data.linear(&start(2, &[point(m[0]), point(m[1])], kappa), Some(dir));
-            if p.amp[0] > 0.0 && p.amp[1] > 0.0 && rss < best.0 {
+            if amp[0] > 0.0 && amp[1] > 0.0 && rss < best.0 {
                 best = (rss, m);
             }
         }

@@ -382,8 +382,7 @@ impl SpectralSolver {
                 ),
             });
         }
-        let results: Vec<(u32, PixelFits)> = self.candidates.iter().copied().zip(fits).collect();
-        let (scene_model, bic_sums) = scene_model(&results, self.config.third_reflection);
+        let (scene_model, bic_sums) = scene_model(&fits, self.config.third_reflection);
         let mut pixels = vec![
             PixelResult {
                 flags: flags::NO_DATA,
@@ -392,7 +391,7 @@ impl SpectralSolver {
             self.width * self.height
         ];
         let mut preferred = vec![0u8; self.width * self.height];
-        for (p, fits) in results {
+        for (&p, fits) in self.candidates.iter().zip(&fits) {
             let own = |models: &[Option<Scored>]| {
                 models
                     .iter()
@@ -544,10 +543,10 @@ impl FitBackend for CpuFits {
 /// The scene's number of reflections: the model with the smallest BIC summed
 /// over the pixels where every compared model was fitted (a pixel's
 /// log-likelihoods add up over the scene). Returns it with the sums.
-fn scene_model(results: &[(u32, PixelFits)], allow_third: bool) -> (usize, [f64; 3]) {
+fn scene_model(results: &[PixelFits], allow_third: bool) -> (usize, [f64; 3]) {
     let top = if allow_third { 3 } else { 2 };
     let mut sums = [0.0; 3];
-    for (_, f) in results {
+    for f in results {
         if f.per_model[..top].iter().all(Option::is_some) {
             for (k, c) in f.per_model[..top].iter().enumerate() {
                 sums[k] += c.map_or(0.0, |c| c.bic);
