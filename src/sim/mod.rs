@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub use camera::{SimCamera, SimParams};
-pub use fastcos::{cos_cycles, sincos_cycles};
+pub use fastcos::{cos_cycles, exp_fast, sincos_cycles};
 pub use scene::RandomSurfaceSpec;
 
 use crate::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};

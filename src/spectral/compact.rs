@@ -34,7 +34,7 @@ use rustfft::num_complex::Complex;
 
 use super::init::refine_peak;
 use super::model::{Design, Normal, Params, Samples, MAX_REFLECTIONS};
-use crate::sim::sincos_cycles;
+use crate::sim::{exp_fast, sincos_cycles};
 
 type C64 = Complex<f64>;
 
@@ -619,17 +619,22 @@ impl CompactStats {
                 let qg = t.gram.len();
                 let o = self.offsets[d];
                 let g = self.grid[p * nd + d] as usize;
+                let eg = &t.ez_gram[g * qg..(g + 1) * qg];
+                let dz = &t.dz[g * qg..(g + 1) * qg];
                 PixelDir {
                     mu_c: (t.g0 + g as i64) as f64 * t.step,
                     z: st[o..o + 2 * q]
                         .chunks_exact(2)
                         .map(|c| C64::new(c[0], c[1]))
                         .collect(),
-                    zg: Vec::new(),
+                    hm: t.mz.iter().map(|m| 0.5 * m).collect(),
+                    hd_re: dz.iter().map(|z| 0.5 * z.re).collect(),
+                    hd_im: dz.iter().map(|z| 0.5 * z.im).collect(),
+                    ez_re: eg.iter().map(|z| z.re).collect(),
+                    ez_im: eg.iter().map(|z| z.im).collect(),
+                    zg_re: vec![0.0; qg],
+                    zg_im: vec![0.0; qg],
                     ez_data: t.ez_data[g * q..(g + 1) * q].to_vec(),
-                    ez_gram: t.ez_gram[g * qg..(g + 1) * qg].to_vec(),
-                    dz: t.dz[g * qg..(g + 1) * qg].to_vec(),
-                    mz: t.mz.clone(),
                     sy: st[o + 2 * q],
                     syy: st[o + 2 * q + 1],
                     n: st[o + 2 * q + 2],
@@ -656,9 +661,11 @@ impl CompactStats {
                 }
                 let e2 = e1 * e1;
                 for (j, &l) in cg.iter().enumerate() {
-                    pd.ez_gram[j] -= e1 * l;
-                    pd.dz[j] -= e2 * l;
-                    pd.mz[j] -= l;
+                    pd.ez_re[j] -= e1.re * l;
+                    pd.ez_im[j] -= e1.im * l;
+                    pd.hd_re[j] -= 0.5 * e2.re * l;
+                    pd.hd_im[j] -= 0.5 * e2.im * l;
+                    pd.hm[j] -= 0.5 * l;
                 }
             } else {
                 let y = f64::from(s.value);
@@ -671,14 +678,14 @@ impl CompactStats {
             }
         }
         for (pd, t) in dirs.iter_mut().zip(&self.tables.dirs) {
+            // Z lifted onto the product nodes: Z' = Lᵀ Z, row by row.
             let qg = t.gram.len();
-            let mut zg = vec![C64::new(0.0, 0.0); qg];
             for (z, row) in pd.z.iter().zip(t.lift.chunks_exact(qg)) {
-                for (o, &l) in zg.iter_mut().zip(row) {
-                    *o += z * l;
+                for ((r, i), &l) in pd.zg_re.iter_mut().zip(pd.zg_im.iter_mut()).zip(row) {
+                    *r += z.re * l;
+                    *i += z.im * l;
                 }
             }
-            pd.zg = zg;
         }
         let n = dirs.iter().map(|d| d.n).sum();
         let sy = dirs.iter().map(|d| d.sy).sum();
@@ -703,12 +710,16 @@ impl CompactStats {
 struct PixelDir {
     mu_c: f64,
     z: Vec<C64>,
-    /// Z lifted onto the product nodes.
-    zg: Vec<C64>,
+    /// On the product nodes, as arrays (real and imaginary parts apart):
+    /// ½M, ½D, E and Z lifted from the data nodes.
+    hm: Vec<f64>,
+    hd_re: Vec<f64>,
+    hd_im: Vec<f64>,
+    ez_re: Vec<f64>,
+    ez_im: Vec<f64>,
+    zg_re: Vec<f64>,
+    zg_im: Vec<f64>,
     ez_data: Vec<C64>,
-    ez_gram: Vec<C64>,
-    dz: Vec<C64>,
-    mz: Vec<f64>,
     /// Σ(y − y0), Σ(y − y0)², samples.
     sy: f64,
     syy: f64,
@@ -725,6 +736,34 @@ pub struct CompactSamples<'a> {
     n: f64,
     sy: f64,
     syy: f64,
+}
+
+thread_local! {
+    /// Per-thread work arrays of [`CompactSamples::dir_sums`].
+    static SCRATCH: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// `Σ a_j b_j + sign · Σ c_j d_j` with four partial sums per term, so that
+/// the sums vectorise (a floating-point reduction is not reordered
+/// otherwise).
+#[inline(always)]
+fn dot2(a: &[f64], b: &[f64], c: &[f64], d: &[f64], sign: f64) -> f64 {
+    let n = a.len().min(b.len()).min(c.len()).min(d.len());
+    let (a, b, c, d) = (&a[..n], &b[..n], &c[..n], &d[..n]);
+    let mut acc = [0.0f64; 4];
+    let mut j = 0;
+    while j + 4 <= n {
+        for l in 0..4 {
+            acc[l] += a[j + l] * b[j + l] + sign * (c[j + l] * d[j + l]);
+        }
+        j += 4;
+    }
+    let mut tail = 0.0;
+    while j < n {
+        tail += a[j] * b[j] + sign * (c[j] * d[j]);
+        j += 1;
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Columns of one direction: `a_k` (B_k), `β_k` (μ_k), the κ column and the
@@ -763,72 +802,151 @@ impl CompactSamples<'_> {
             })
     }
 
-    /// Columns at τ for `p`, `nx` of them: `a_k`; with derivatives also
-    /// `β_k = 2πiτ B_k a_k` and `−τ² m`; last the model `m = Σ B_k a_k`.
-    #[inline]
-    fn columns(
-        p: &Params,
-        delta: &[f64; MAX_REFLECTIONS],
-        derivs: bool,
-        t: f64,
-        out: &mut [C64; NX],
-    ) {
-        let k = p.k;
-        let e = (-p.kappa * t * t).exp();
-        let mut m = C64::new(0.0, 0.0);
-        for j in 0..k {
-            let (c, s) = sincos_cycles(delta[j] * t);
-            let a = C64::new(e * c, e * s);
-            out[j] = a;
-            m += a * p.amp[j];
-            if derivs {
-                let f = std::f64::consts::TAU * t * p.amp[j];
-                out[k + j] = C64::new(-a.im * f, a.re * f);
+    fn dir_sums(&self, d: usize, p: &Params, derivs: bool, data: bool) -> DirSums {
+        SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            #[cfg(target_arch = "x86_64")]
+            if has_avx2_fma() {
+                // SAFETY: the CPU has AVX2 and FMA (checked at run time).
+                return unsafe { self.dir_sums_avx2(d, p, derivs, data, &mut s) };
             }
-        }
-        if derivs {
-            out[2 * k] = m * (-t * t);
-            out[2 * k + 1] = m;
-        } else {
-            out[k] = m;
-        }
+            self.dir_sums_body(d, p, derivs, data, &mut s)
+        })
     }
 
-    fn dir_sums(&self, d: usize, p: &Params, derivs: bool, data: bool) -> DirSums {
+    /// [`Self::dir_sums_body`] compiled for AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA ([`has_avx2_fma`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn dir_sums_avx2(
+        &self,
+        d: usize,
+        p: &Params,
+        derivs: bool,
+        data: bool,
+        scratch: &mut Vec<f64>,
+    ) -> DirSums {
+        self.dir_sums_body(d, p, derivs, data, scratch)
+    }
+
+    /// The inner products of one direction, node-major passes over arrays
+    /// (structure of arrays) that the compiler vectorises: the columns at
+    /// every product node — `a_k = e^{−κτ²} e^{2πiδ_kτ}`; with derivatives
+    /// `β_k = 2πiτ B_k a_k` and the κ column `−τ² m`; last the model
+    /// `m = Σ B_k a_k` — then their weighted dot products.
+    #[inline(always)]
+    fn dir_sums_body(
+        &self,
+        d: usize,
+        p: &Params,
+        derivs: bool,
+        data: bool,
+        scratch: &mut Vec<f64>,
+    ) -> DirSums {
         let pd = &self.dirs[d];
         let t = &self.tables.dirs[d];
         let ax = self.design.axes[d];
-        let mut delta = [0.0; MAX_REFLECTIONS];
-        for (dl, uv) in delta.iter_mut().zip(&p.uv[..p.k]) {
-            *dl = ax.s(uv[0], uv[1]) - pd.mu_c;
+        let k = p.k;
+        let nx = if derivs { 2 * k + 2 } else { k + 1 };
+        let q = t.gram.len();
+        let tau = &t.gram.tau[..q];
+        scratch.clear();
+        scratch.resize((1 + 4 * nx) * q, 0.0);
+        let (e, rest) = scratch.split_at_mut(q);
+        let (cre, rest) = rest.split_at_mut(nx * q);
+        let (cim, rest) = rest.split_at_mut(nx * q);
+        let (pre, pim) = rest.split_at_mut(nx * q);
+        for (ej, &tj) in e.iter_mut().zip(tau) {
+            *ej = exp_fast(-p.kappa * tj * tj);
         }
-        let nx = if derivs { 2 * p.k + 2 } else { p.k + 1 };
+        let m = nx - 1;
+        for j in 0..k {
+            let dl = ax.s(p.uv[j][0], p.uv[j][1]) - pd.mu_c;
+            let (re, im) = (&mut cre[j * q..(j + 1) * q], &mut cim[j * q..(j + 1) * q]);
+            for (((r, i), &ej), &tj) in re.iter_mut().zip(im.iter_mut()).zip(&*e).zip(tau) {
+                let (c, s) = sincos_cycles(dl * tj);
+                *r = ej * c;
+                *i = ej * s;
+            }
+        }
+        {
+            // m = Σ B_k a_k (the last column; the a_k come first).
+            let (lo_re, hi_re) = cre.split_at_mut(m * q);
+            let (lo_im, hi_im) = cim.split_at_mut(m * q);
+            for j in 0..k {
+                let b = p.amp[j];
+                let (ar, ai) = (&lo_re[j * q..(j + 1) * q], &lo_im[j * q..(j + 1) * q]);
+                for (((mr, mi), &r), &i) in hi_re.iter_mut().zip(hi_im.iter_mut()).zip(ar).zip(ai) {
+                    *mr += b * r;
+                    *mi += b * i;
+                }
+            }
+            if derivs {
+                for j in 0..k {
+                    let f = std::f64::consts::TAU * p.amp[j];
+                    let (ar, br) = lo_re.split_at_mut(k * q);
+                    let (ai, bi) = lo_im.split_at_mut(k * q);
+                    let (ar, ai) = (&ar[j * q..(j + 1) * q], &ai[j * q..(j + 1) * q]);
+                    let (br, bi) = (&mut br[j * q..(j + 1) * q], &mut bi[j * q..(j + 1) * q]);
+                    for ((((r2, i2), &r), &i), &tj) in
+                        br.iter_mut().zip(bi.iter_mut()).zip(ar).zip(ai).zip(tau)
+                    {
+                        *r2 = -i * f * tj;
+                        *i2 = r * f * tj;
+                    }
+                }
+                let kr = &mut lo_re[2 * k * q..(2 * k + 1) * q];
+                let ki = &mut lo_im[2 * k * q..(2 * k + 1) * q];
+                for ((((r2, i2), &r), &i), &tj) in kr
+                    .iter_mut()
+                    .zip(ki.iter_mut())
+                    .zip(&*hi_re)
+                    .zip(&*hi_im)
+                    .zip(tau)
+                {
+                    *r2 = -tj * tj * r;
+                    *i2 = -tj * tj * i;
+                }
+            }
+        }
+        // Weighted columns: ½Re(M a b̄) + ½Re(D a b) = pr·b.re + pi·b.im with
+        // pr + i·pi = ½M a + conj(½D a) (M real).
+        for x in 0..nx {
+            let r = x * q..(x + 1) * q;
+            let it = pre[r.clone()]
+                .iter_mut()
+                .zip(pim[r.clone()].iter_mut())
+                .zip(&cre[r.clone()])
+                .zip(&cim[r])
+                .zip(&pd.hm)
+                .zip(pd.hd_re.iter().zip(&pd.hd_im));
+            for (((((pr, pi), &cr), &ci), &hm), (&hr, &hi)) in it {
+                *pr = hm * cr + hr * cr - hi * ci;
+                *pi = hm * ci - hr * ci - hi * cr;
+            }
+        }
         let mut out = DirSums {
             g: [[0.0; NX]; NX],
             e: [0.0; NX],
             y: [0.0; NX],
         };
-        let mut col = [C64::new(0.0, 0.0); NX];
-        for (j, &tau) in t.gram.tau.iter().enumerate() {
-            Self::columns(p, &delta, derivs, tau, &mut col);
-            let hm = 0.5 * pd.mz[j];
-            let hd = 0.5 * pd.dz[j];
-            let ez = pd.ez_gram[j];
-            for (x, cx) in col[..nx].iter().enumerate() {
-                out.e[x] += ez.re * cx.re - ez.im * cx.im;
-                // ½Re(M a b̄) + ½Re(D a b) (M real) = pr·b.re + pi·b.im
-                // with pr + i·pi = ½M a + conj(½D a).
-                let pr = hm * cx.re + hd.re * cx.re - hd.im * cx.im;
-                let pi = hm * cx.im - hd.re * cx.im - hd.im * cx.re;
-                for (g, cy) in out.g[x][x..nx].iter_mut().zip(&col[x..nx]) {
-                    *g += pr * cy.re + pi * cy.im;
-                }
-            }
+        for x in 0..nx {
+            let (xr, xi) = (&cre[x * q..(x + 1) * q], &cim[x * q..(x + 1) * q]);
+            out.e[x] = dot2(&pd.ez_re, xr, &pd.ez_im, xi, -1.0);
             if data {
-                let z = pd.zg[j];
-                for (y, c) in out.y[..nx].iter_mut().zip(&col[..nx]) {
-                    *y += z.re * c.re - z.im * c.im;
-                }
+                out.y[x] = dot2(&pd.zg_re, xr, &pd.zg_im, xi, -1.0);
+            }
+            let (wr, wi) = (&pre[x * q..(x + 1) * q], &pim[x * q..(x + 1) * q]);
+            for y in x..nx {
+                out.g[x][y] = dot2(
+                    wr,
+                    &cre[y * q..(y + 1) * q],
+                    wi,
+                    &cim[y * q..(y + 1) * q],
+                    1.0,
+                );
             }
         }
         out
@@ -1045,8 +1163,8 @@ impl Samples for CompactSamples<'_> {
         let (mut m00, mut m01) = (0.0, 0.0);
         for (j, nd) in gram.iter().enumerate() {
             let e2 = nd.cur.norm_sqr();
-            m00 += 0.5 * pd.mz[j] * e2;
-            m01 += 0.5 * pd.mz[j] * e2 * nd.off.re;
+            m00 += pd.hm[j] * e2;
+            m01 += pd.hm[j] * e2 * nd.off.re;
         }
         let mut out = Vec::with_capacity(count);
         for k in 0..count {
@@ -1058,13 +1176,13 @@ impl Samples for CompactSamples<'_> {
             for (j, nd) in gram.iter_mut().enumerate() {
                 let a0 = nd.cur;
                 let a1 = a0 * nd.off;
-                let ez = pd.ez_gram[j];
+                let ez = C64::new(pd.ez_re[j], pd.ez_im[j]);
                 e0 += (ez * a0).re;
                 e1 += (ez * a1).re;
-                let z = pd.zg[j];
+                let z = C64::new(pd.zg_re[j], pd.zg_im[j]);
                 y0 += (z * a0).re;
                 y1 += (z * a1).re;
-                let w = pd.dz[j] * 0.5 * nd.cur2;
+                let w = C64::new(pd.hd_re[j], pd.hd_im[j]) * nd.cur2;
                 let wo = w * nd.off;
                 g00 += w.re;
                 g01 += wo.re;
