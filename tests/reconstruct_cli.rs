@@ -141,3 +141,62 @@ fn dark_and_saturated_frames_give_flagged_pixels_not_panics() {
     let err = solver.solve().unwrap_err().to_string();
     assert!(err.contains("0 of 200 frames"), "{err}");
 }
+
+#[test]
+fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let acq = simulate(dir.path());
+    let mut coords = Vec::new();
+    for engine in ["series", "statistics"] {
+        let res = dir.path().join(engine);
+        let out = mfd(&[
+            "reconstruct",
+            acq.to_str().unwrap(),
+            "--out",
+            res.to_str().unwrap(),
+            "--no-surfaces",
+            "--engine",
+            engine,
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let (_, c) = mfd::npy::read_f64(&res.join("screen_coords.npy")).unwrap();
+        coords.push(c);
+    }
+    // Same least squares: the points agree far below their σ (~0.05 px at
+    // 2 % noise here); NaN in the same places.
+    let mut worst = 0.0f64;
+    for (a, b) in coords[0].iter().zip(&coords[1]) {
+        assert_eq!(a.is_nan(), b.is_nan());
+        if a.is_finite() {
+            worst = worst.max((a - b).abs());
+        }
+    }
+    assert!(worst < 1e-3, "{worst} px");
+    for (args, needle) in [
+        (
+            vec!["--engine", "fast"],
+            "--engine: expected auto, series or statistics",
+        ),
+        (
+            vec!["--engine", "statistics", "--band-bins", "0"],
+            "band_bins: expected a number of Fourier bins > 0",
+        ),
+    ] {
+        let res = dir.path().join("bad");
+        let mut all = vec![
+            "reconstruct",
+            acq.to_str().unwrap(),
+            "--out",
+            res.to_str().unwrap(),
+            "--no-surfaces",
+        ];
+        all.extend(args);
+        let out = mfd(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(needle), "{err}");
+    }
+}

@@ -257,6 +257,24 @@ fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {
             println!("  {n} pixels: {name}");
         }
     }
+    let count = |f: &dyn Fn(u16) -> bool| {
+        maps.pixels
+            .iter()
+            .filter(|p| p.flags & flags::NO_DATA == 0 && f(p.flags))
+            .count()
+    };
+    let left = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL == 0);
+    if left > 0 {
+        println!("  {left} pixels: signal or fit outside the statistics engine's band");
+    }
+    let quiet = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL != 0);
+    if quiet + left > fitted / 2 {
+        println!(
+            "  most pixels show no signal within the band the statistics engine keeps: the \
+             element may sit away from where the station file puts it; rerun with \
+             --band-bins 8 or --engine series"
+        );
+    }
     if let Some(s) = maps.saturation_counts {
         println!("  saturation level {s} counts");
     }
