@@ -94,6 +94,14 @@ pub struct MeasureArgs {
     /// Record only; skip the reconstruction.
     #[arg(long)]
     no_reconstruct: bool,
+    /// How the streaming solver keeps the pixels' data: auto, series or
+    /// statistics (fixed memory per pixel, a few seconds after the last
+    /// frame on the paper's station; see `mfd reconstruct --help`).
+    #[arg(long, default_value = "auto")]
+    engine: String,
+    /// Statistics engine: Fourier bins beyond the predicted points kept.
+    #[arg(long, default_value_t = 3.0)]
+    band_bins: f64,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
 }
@@ -202,7 +210,14 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
         Recorder::create(&dir, &station, &patterns, args.overwrite)?
     };
     let mut solver = (!args.no_reconstruct)
-        .then(|| start_solver(&station, &patterns, &dir, recorder.recorded()))
+        .then(|| {
+            let config = SpectralConfig {
+                engine: super::parse_engine(&args.engine)?,
+                band_bins: args.band_bins,
+                ..SpectralConfig::default()
+            };
+            start_solver(&station, &patterns, &dir, recorder.recorded(), config)
+        })
         .transpose()?;
     let first = recorder.recorded();
     let stop = Arc::new(AtomicBool::new(false));
@@ -343,9 +358,10 @@ fn start_solver(
     patterns: &[Pattern],
     dir: &Path,
     recorded: usize,
+    config: SpectralConfig,
 ) -> anyhow::Result<SpectralSolver> {
     let frames = FrameInfo::from_patterns(patterns);
-    let mut solver = SpectralSolver::new(station, &frames, SpectralConfig::default())?;
+    let mut solver = SpectralSolver::new(station, &frames, config)?;
     if recorded > 0 {
         let acq = Acquisition::open(dir)?;
         let mut frame = Vec::new();
