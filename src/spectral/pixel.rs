@@ -250,9 +250,12 @@ pub fn fit_samples<S: Samples + ?Sized>(
         two = Some(best);
     }
     let merged = one.fit.params;
+    // The expected pair's separation σ at unit noise: the same for every
+    // model (it is built on `merged`), so computed once.
+    let unit_sd = std::cell::OnceCell::new();
     for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
         out.per_model[k] = cand.map(|c| Scored {
-            result: finalize(ctx, &c, data, d12, &merged, out.base),
+            result: finalize(ctx, &c, data, d12, &merged, &unit_sd, out.base),
             bic: c.bic,
         });
     }
@@ -262,15 +265,22 @@ pub fn fit_samples<S: Samples + ?Sized>(
 /// The pixel's result under the candidate's model: labels from physics,
 /// checks, uncertainties.
 /// `merged` is the one-reflection fit: its amplitude and falloff describe
-/// the pixel's signal robustly, so they judge whether a pair is separable.
+/// the pixel's signal robustly, so they judge whether a pair is separable;
+/// `unit_sd` caches that judgement's σ at unit noise.
 fn finalize<S: Samples + ?Sized>(
     ctx: &PixelContext,
     cand: &Candidate,
     data: &S,
     d12: Option<[f64; 2]>,
     merged: &Params,
+    unit_sd: &std::cell::OnceCell<f64>,
     base: PixelResult,
 ) -> PixelResult {
+    let expected_sd = |d: &[f64; 2], sigma2: f64| {
+        unit_sd.get_or_init(|| {
+            expected_separation_std(ctx, data, merged, merged.uv[0], merged.amp[0], d, 1.0)
+        }) * sigma2.sqrt()
+    };
     let mut out = base;
     let fit = &cand.fit;
     let p = fit.params;
@@ -309,7 +319,8 @@ fn finalize<S: Samples + ?Sized>(
         // back reflection of the expected strength at the expected offset
         // would have been resolved is its absence real (AR-coated back).
         out.separation_bins = separation_bins(ctx, &d);
-        let sd = expected_separation_std(ctx, data, &p, p.uv[0], p.amp[0], &d, sigma2);
+        // Here p is `merged` itself (the one-reflection fit).
+        let sd = expected_sd(&d, sigma2);
         if RESOLVE_SIGMAS * sd > d[0].hypot(d[1]) {
             out.flags |= flags::UNRESOLVED;
             return out;
@@ -346,8 +357,7 @@ fn finalize<S: Samples + ?Sized>(
     let sd = cov
         .as_ref()
         .map_or(f64::INFINITY, |c| separation_std(c, &p, i0, i1));
-    let sd_expected =
-        expected_separation_std(ctx, data, merged, merged.uv[0], merged.amp[0], &d, sigma2);
+    let sd_expected = expected_sd(&d, sigma2);
     let expected = d[0].hypot(d[1]);
     if RESOLVE_SIGMAS * sd.max(sd_expected) > expected {
         out.flags |= flags::UNRESOLVED;
