@@ -7,7 +7,7 @@ mod common;
 use common::mfd;
 
 use mfd::acquisition::FrameInfo;
-use mfd::spectral::{flags, SpectralConfig, SpectralSolver};
+use mfd::spectral::{flags, Engine, SpectralConfig, SpectralSolver};
 use mfd::station::Station;
 
 fn simulate(dir: &std::path::Path) -> std::path::PathBuf {
@@ -114,8 +114,15 @@ fn dark_and_saturated_frames_give_flagged_pixels_not_panics() {
             phase_rad: 0.0,
         })
         .collect();
-    for level in [0u16, 65535, 1000] {
-        let mut solver = SpectralSolver::new(&station, &frames, SpectralConfig::default()).unwrap();
+    for (engine, level) in [Engine::Series, Engine::Statistics]
+        .into_iter()
+        .flat_map(|e| [0u16, 65535, 1000].map(|l| (e, l)))
+    {
+        let config = SpectralConfig {
+            engine,
+            ..SpectralConfig::default()
+        };
+        let mut solver = SpectralSolver::new(&station, &frames, config).unwrap();
         let frame = vec![level; 48 * 48];
         for k in 0..frames.len() {
             solver.push_frame(k, &frame).unwrap();
@@ -125,7 +132,7 @@ fn dark_and_saturated_frames_give_flagged_pixels_not_panics() {
         for p in &maps.pixels {
             assert!(
                 p.s[0][0].is_nan() && p.flags & (flags::NO_DATA | flags::NO_SIGNAL) != 0,
-                "level {level}: {p:?}"
+                "{engine:?}, level {level}: {p:?}"
             );
         }
     }

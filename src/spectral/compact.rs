@@ -345,6 +345,12 @@ struct SetAside {
     value: u16,
 }
 
+/// Most samples set aside over the whole acquisition (12 bytes each: 192 MB).
+/// Bad input — dark or saturated frames for a quarter of a full-sensor run —
+/// would otherwise set aside billions; past this, pixels with further
+/// clipped samples are given up (flagged saturated, no data) instead.
+const MAX_SET_ASIDE: usize = 16 << 20;
+
 /// Full scales of 8…16-bit cameras.
 const FULL_SCALES: [u16; 5] = [255, 1023, 4095, 16383, 65535];
 
@@ -362,9 +368,12 @@ pub struct CompactStats {
     stride: usize,
     offsets: Vec<usize>,
     set_aside: Vec<SetAside>,
-    /// Per pixel: samples set aside; past `cap` the pixel is given up.
+    /// Per pixel: samples set aside; past `cap` (or once [`MAX_SET_ASIDE`]
+    /// is reached) the pixel is given up.
     counts: Vec<u32>,
     cap: u32,
+    /// Most samples set aside in all ([`MAX_SET_ASIDE`]).
+    budget: usize,
     configured_saturation: Option<u16>,
 }
 
@@ -405,6 +414,7 @@ impl CompactStats {
             // A pixel with more than a quarter of its samples clipped is
             // not fitted (flagged saturated, no data) and costs no memory.
             cap: (frames / 4) as u32,
+            budget: MAX_SET_ASIDE,
             configured_saturation,
             tables,
         }
@@ -468,6 +478,8 @@ impl CompactStats {
         let clipped =
             |v: u16| v == 0 || FULL_SCALES.contains(&v) || configured.is_some_and(|s| v >= s);
         let avx2 = has_avx2_fma();
+        let budget = std::sync::atomic::AtomicUsize::new(self.set_aside.len());
+        let limit = self.budget;
         let aside: Vec<Vec<SetAside>> = self
             .state
             .par_chunks_mut(chunk * stride)
@@ -496,6 +508,12 @@ impl CompactStats {
                             let v = block[r * pixels + p];
                             if clipped(v) {
                                 *count += 1;
+                                let room = budget
+                                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+                                    < limit;
+                                if !room {
+                                    *count = cap + 1; // given up
+                                }
                                 if *count <= cap {
                                     out.push(SetAside {
                                         pixel: p as u32,
@@ -1358,6 +1376,15 @@ mod tests {
                 assert!((aa[0] - ab[0]).abs() < 1e-6 && (aa[1] - ab[1]).abs() < 1e-6);
             }
         }
+        // Past the acquisition's budget of set-aside samples the pixel is
+        // given up, not fitted on sums that still hold its clipped samples.
+        let mut tight = CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None);
+        tight.budget = 5;
+        for (r, chunk) in raw.chunks(STATS_BLOCK).enumerate() {
+            tight.ingest(r * STATS_BLOCK, chunk.len(), chunk);
+        }
+        tight.seal();
+        assert!(tight.samples(&design, 0, Some(4095)).is_none());
         for d in 0..2 {
             let (ma, _) = series.peak(d).unwrap();
             let (mb, rb) = compact.peak(d).unwrap();
