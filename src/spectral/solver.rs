@@ -441,8 +441,10 @@ impl SpectralSolver {
 }
 
 /// Everything the per-pixel fits of one acquisition need: the schedule, the
-/// geometry prior and the series of the candidate pixels, pixel-major (the
-/// `frames` samples of candidate q at `series[q * frames..]`, raw counts).
+/// geometry prior and either the series of the candidate pixels,
+/// pixel-major (the `frames` samples of candidate q at
+/// `series[q * frames..]`, raw counts), or their statistics (`stats`, with
+/// the statistics engine; `series` is then empty).
 pub struct FitBatch<'a> {
     /// The schedule.
     pub design: &'a Design,
