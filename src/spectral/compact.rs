@@ -870,12 +870,18 @@ impl CompactSamples<'_> {
         let nx = if derivs { 2 * k + 2 } else { k + 1 };
         let q = t.gram.len();
         let tau = &t.gram.tau[..q];
-        scratch.clear();
-        scratch.resize((1 + 4 * nx) * q, 0.0);
+        // Every array below is written before it is read, but for the model
+        // column, which is accumulated: only that one is zeroed.
+        if scratch.len() < (1 + 4 * nx) * q {
+            scratch.resize((1 + 4 * nx) * q, 0.0);
+        }
         let (e, rest) = scratch.split_at_mut(q);
         let (cre, rest) = rest.split_at_mut(nx * q);
         let (cim, rest) = rest.split_at_mut(nx * q);
-        let (pre, pim) = rest.split_at_mut(nx * q);
+        let (pre, rest) = rest.split_at_mut(nx * q);
+        let pim = &mut rest[..nx * q];
+        cre[(nx - 1) * q..].fill(0.0);
+        cim[(nx - 1) * q..].fill(0.0);
         for (ej, &tj) in e.iter_mut().zip(tau) {
             *ej = exp_fast(-p.kappa * tj * tj);
         }
@@ -1165,7 +1171,7 @@ impl Samples for CompactSamples<'_> {
             off: C64,
         }
         let node = |tau: f64| {
-            let e = (-kappa * tau * tau).exp();
+            let e = exp_fast(-kappa * tau * tau);
             let off = cis(offset * tau);
             let cur = cis((mu0 - pd.mu_c) * tau) * e;
             let rot = cis(step * tau);
