@@ -192,6 +192,10 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
             vec!["--engine", "statistics", "--band-bins", "0"],
             "band_bins: expected a number of Fourier bins > 0",
         ),
+        (
+            vec!["--engine", "statistics", "--band-bins", "300"],
+            "needs more than 256 nodes; use a smaller band or the series engine",
+        ),
     ] {
         let res = dir.path().join("bad");
         let mut all = vec![

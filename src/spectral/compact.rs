@@ -133,16 +133,13 @@ impl Nodes {
         worst
     }
 
-    /// The fewest nodes (multiple of 4, ≤ 256) meeting [`NODE_TOL`].
-    fn enough(lo: f64, hi: f64, delta: f64, kappas: [f64; 2], degree: i32) -> Nodes {
-        let mut q = 8;
-        loop {
-            let n = Nodes::new(lo, hi, q);
-            if q >= 256 || n.error(delta, kappas, degree) < NODE_TOL {
-                return n;
-            }
-            q += 4;
-        }
+    /// The fewest nodes (multiple of 4, ≤ 256) meeting [`NODE_TOL`];
+    /// `None` when 256 do not.
+    fn enough(lo: f64, hi: f64, delta: f64, kappas: [f64; 2], degree: i32) -> Option<Nodes> {
+        (8..=256)
+            .step_by(4)
+            .map(|q| Nodes::new(lo, hi, q))
+            .find(|n| n.error(delta, kappas, degree) < NODE_TOL)
     }
 }
 
@@ -196,7 +193,12 @@ impl CompactTables {
     /// Tables for `design`; per direction, centres `centres[d]` (μ, one per
     /// pixel) with the band half-width `band[d]` (μ) around each; κ from
     /// `kappa_range`.
-    fn new(design: &Design, centres: &[Vec<f64>], band: &[f64], kappa_range: [f64; 2]) -> Self {
+    fn new(
+        design: &Design,
+        centres: &[Vec<f64>],
+        band: &[f64],
+        kappa_range: [f64; 2],
+    ) -> Result<Self, String> {
         let nd = design.axes.len();
         let mut frame_pos = vec![(0, 0); design.frames.len()];
         let mut per_dir: Vec<Vec<usize>> = vec![Vec::new(); nd];
@@ -213,14 +215,22 @@ impl CompactTables {
                 let bin = 1.0 / (hi - lo).max(1e-9);
                 let step = GRID_BINS * bin;
                 let delta = band[d] + 0.5 * step;
-                let data = Nodes::enough(lo, hi, delta, kappa_range, 2);
+                let too_wide = || {
+                    format!(
+                        "direction {d}: a band of ±{:.1} Fourier bins needs more than 256 \
+                         nodes; use a smaller band or the series engine",
+                        delta / bin
+                    )
+                };
+                let data = Nodes::enough(lo, hi, delta, kappa_range, 2).ok_or_else(too_wide)?;
                 let gram = Nodes::enough(
                     lo,
                     hi,
                     2.0 * delta,
                     [2.0 * kappa_range[0], 2.0 * kappa_range[1]],
                     4,
-                );
+                )
+                .ok_or_else(too_wide)?;
                 let (qd, qg) = (data.len(), gram.len());
                 let mut card_data = vec![0.0; taus.len() * qd];
                 let mut card_gram = vec![0.0; taus.len() * qg];
@@ -293,7 +303,7 @@ impl CompactTables {
                         pw.push(C64::new(c, s) * hann(t));
                     }
                 }
-                DirTables {
+                Ok(DirTables {
                     data,
                     gram,
                     card_data,
@@ -311,10 +321,10 @@ impl CompactTables {
                     pdelta,
                     pw,
                     w2,
-                }
+                })
             })
-            .collect();
-        CompactTables {
+            .collect::<Result<Vec<_>, String>>()?;
+        Ok(CompactTables {
             dirs,
             frame_pos,
             tau_phase: design
@@ -323,7 +333,7 @@ impl CompactTables {
                 .map(|f| (f.tau, f.phase_cycles))
                 .collect(),
             kappa_range,
-        }
+        })
     }
 
     /// Nodes per direction: (data, products).
@@ -381,14 +391,17 @@ impl CompactStats {
     /// Statistics for `pixels` pixels whose centres, per pixel and
     /// direction, are `centres[d][pixel]` (μ), with band half-widths
     /// `band[d]` (μ); κ within `kappa_range`.
+    ///
+    /// # Errors
+    /// When the band is too wide for 256 nodes.
     pub fn new(
         design: &Design,
         centres: &[Vec<f64>],
         band: &[f64],
         kappa_range: [f64; 2],
         configured_saturation: Option<u16>,
-    ) -> Self {
-        let tables = CompactTables::new(design, centres, band, kappa_range);
+    ) -> Result<Self, String> {
+        let tables = CompactTables::new(design, centres, band, kappa_range)?;
         let nd = tables.dirs.len();
         let pixels = centres.first().map_or(0, Vec::len);
         let mut offsets = Vec::with_capacity(nd);
@@ -404,7 +417,7 @@ impl CompactStats {
             }
         }
         let frames = tables.frame_pos.len();
-        CompactStats {
+        Ok(CompactStats {
             grid,
             state: vec![0.0; pixels * stride],
             stride,
@@ -417,7 +430,7 @@ impl CompactStats {
             budget: MAX_SET_ASIDE,
             configured_saturation,
             tables,
-        }
+        })
     }
 
     /// The schedule tables.
@@ -1313,7 +1326,8 @@ mod tests {
             .collect();
         let band: Vec<f64> = vec![3.0 / 199.8; 2];
         let k0 = 200.0f64.powi(-2);
-        let mut stats = CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None);
+        let mut stats =
+            CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None).unwrap();
         for (r, chunk) in raw.chunks(STATS_BLOCK).enumerate() {
             stats.ingest(r * STATS_BLOCK, chunk.len(), chunk);
         }
@@ -1384,7 +1398,8 @@ mod tests {
         }
         // Past the acquisition's budget of set-aside samples the pixel is
         // given up, not fitted on sums that still hold its clipped samples.
-        let mut tight = CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None);
+        let mut tight =
+            CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None).unwrap();
         tight.budget = 5;
         for (r, chunk) in raw.chunks(STATS_BLOCK).enumerate() {
             tight.ingest(r * STATS_BLOCK, chunk.len(), chunk);

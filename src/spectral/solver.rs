@@ -194,10 +194,10 @@ impl SpectralSolver {
                 ),
             });
         }
-        let stats = use_stats.then(|| {
+        let stats = if use_stats {
             let kappa0 = kappa_start(&config, &design);
             let (centres, band) = band_centres(&design, &prior, &candidates, &config, &plans);
-            Box::new(CompactStats::new(
+            let stats = CompactStats::new(
                 &design,
                 &centres,
                 &band,
@@ -205,8 +205,15 @@ impl SpectralSolver {
                 // infinity (κ < 0 lets the fit say "no falloff").
                 [-kappa0, 16.0 * kappa0],
                 config.saturation_counts,
-            ))
-        });
+            )
+            .map_err(|problem| SpectralError::Config {
+                field: "band_bins",
+                problem,
+            })?;
+            Some(Box::new(stats))
+        } else {
+            None
+        };
         let block_len = if use_stats { STATS_BLOCK } else { BLOCK };
         Ok(SpectralSolver {
             width: prior.width,
