@@ -36,6 +36,11 @@ $mfd compare --screen-coords "$out/result/screen_coords.npy" \
 $mfd compare --surfaces "$out/result/surfaces.json" \
   --truth-surfaces "$out/acquisition/truth/truth_surfaces.json" --summary "$out/result/summary.json"
 
+echo "== the same frames through the statistics engine (fixed memory per pixel, seconds): the same points"
+$mfd reconstruct "$out/acquisition" --out "$out/result-statistics" --engine statistics --no-surfaces
+$mfd compare --screen-coords "$out/result-statistics/screen_coords.npy" \
+  --truth "$out/acquisition/truth/truth_screen_coords.npy" --std "$out/result-statistics/screen_std.npy"
+
 echo "== surfaces from the ideal (traced) screen points: the surface solvers alone, exact"
 $mfd reconstruct --screen-coords "$out/trace/screen_coords.npy" --station calib/paper-sim.toml \
   --out "$out/from-trace" --terms 36
@@ -44,4 +49,5 @@ $mfd compare --surfaces "$out/from-trace/surfaces.json" \
 du -sh "$out/acquisition" | awk '{print "   acquisition size: " $1}'
 echo "files: $out/acquisition (frames.npy, acquisition.toml, truth/), $out/trace (screen_coords.npy),"
 echo "       $out/result (screen_coords.npy, screen_std.npy, screen_cov.npy, quality maps, surfaces.json,"
-echo "       front.png, back.png, *_coefficients.png, *_height_nm.npy, summary.json), $out/from-trace"
+echo "       front.png, back.png, *_coefficients.png, *_height_nm.npy, summary.json), $out/from-trace,"
+echo "       $out/result-statistics (the spectral maps from the statistics engine)"
