@@ -217,9 +217,10 @@ impl CompactTables {
                 let delta = band[d] + 0.5 * step;
                 let too_wide = || {
                     format!(
-                        "direction {d}: a band of ±{:.1} Fourier bins needs more than 256 \
-                         nodes; use a smaller band or the series engine",
-                        delta / bin
+                        "direction {d}: a band of ±{:.1} Fourier bins with τ_max down to {:.0} \
+                         needs more than 256 nodes; use a smaller band or the series engine",
+                        delta / bin,
+                        kappa_range[1].max(1e-300).sqrt().recip()
                     )
                 };
                 let data = Nodes::enough(lo, hi, delta, kappa_range, 2).ok_or_else(too_wide)?;

@@ -201,8 +201,8 @@ impl SpectralSolver {
                 &design,
                 &centres,
                 &band,
-                // τ_max from a quarter of the schedule's (blur) to beyond
-                // infinity (κ < 0 lets the fit say "no falloff").
+                // κ from −κ0 (no falloff, or a rising one: the fit may say
+                // so) to 16 κ0 (τ_max down to a quarter of the starting one).
                 [-kappa0, 16.0 * kappa0],
                 config.saturation_counts,
             )
