@@ -23,6 +23,9 @@ pub struct TableArgs {
     /// Read noise, fraction of full scale.
     #[arg(long, default_value_t = 0.05)]
     noise: f64,
+    /// Spectral engine: auto, series or statistics.
+    #[arg(long, default_value = "auto")]
+    engine: String,
 }
 
 /// The 48 × 48 bench station ([`mfd::station::bench_station`]) at 15°.
@@ -37,15 +40,16 @@ pub fn run(args: &TableArgs) -> anyhow::Result<()> {
          RMS(error/reported σ) | flagged |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
+    let engine = super::parse_engine(&args.engine)?;
     for &n in &args.index {
         for &t in &args.thickness_mm {
-            row(t, n, args.noise)?;
+            row(t, n, args.noise, engine)?;
         }
     }
     Ok(())
 }
 
-fn row(t: f64, n: f64, noise: f64) -> anyhow::Result<()> {
+fn row(t: f64, n: f64, noise: f64, engine: mfd::spectral::Engine) -> anyhow::Result<()> {
     let station = small_station(t, n)?;
     let (front, back) = RandomSurfaceSpec::default().draw_pair(25.5, [0.0, 0.0], 31)?;
     let view = TracedView::trace(&station, &Plate::new(&station, front, back, 3.0));
@@ -57,7 +61,11 @@ fn row(t: f64, n: f64, noise: f64) -> anyhow::Result<()> {
     let mut cam = SimCamera::new(&view, &station.screen, params.clone())?;
     let patterns = Schedule::default().patterns();
     let frames: Vec<FrameInfo> = FrameInfo::from_patterns(&patterns);
-    let mut solver = SpectralSolver::new(&station, &frames, SpectralConfig::default())?;
+    let config = SpectralConfig {
+        engine,
+        ..SpectralConfig::default()
+    };
+    let mut solver = SpectralSolver::new(&station, &frames, config)?;
     let mut buf = vec![0u16; station.camera.pixel_count()];
     for (k, p) in patterns.iter().enumerate() {
         cam.render(p, k as u64, &mut buf);
