@@ -1415,4 +1415,51 @@ mod tests {
             assert!(rb > 100.0, "{rb}");
         }
     }
+
+    /// The portable code paths (taken on CPUs without AVX2/FMA, as CI's may
+    /// be) give what the dispatched ones give, to rounding (FMA contracts
+    /// products; 1e-12 relative is ~10⁴ ulps of slack over sums of ~10²).
+    #[test]
+    fn portable_paths_match_the_dispatched_ones() {
+        let w: Vec<f64> = (0..4 * 88)
+            .map(|k| ((k * 37 % 101) as f64 - 50.0) / 7.0)
+            .collect();
+        let items: Vec<(f64, usize)> = (0..7).map(|r| (100.0 + r as f64, (r % 4) * 88)).collect();
+        let mut a = vec![0.5; 88];
+        let mut b = a.clone();
+        accumulate(&mut a, &items, &w, has_avx2_fma());
+        accumulate(&mut b, &items, &w, false);
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
+        }
+        let design = design();
+        let t = truth();
+        let raw = series(&design, &t, 40.0);
+        let centres: Vec<Vec<f64>> = design
+            .axes
+            .iter()
+            .map(|ax| vec![0.5 * (ax.s(800.0, 600.0) + ax.s(809.0, 603.0))])
+            .collect();
+        let k0 = 200.0f64.powi(-2);
+        let band = vec![3.0 / 199.8; 2];
+        let mut stats =
+            CompactStats::new(&design, &centres, &band, [-k0, 16.0 * k0], None).unwrap();
+        for (r, chunk) in raw.chunks(STATS_BLOCK).enumerate() {
+            stats.ingest(r * STATS_BLOCK, chunk.len(), chunk);
+        }
+        stats.seal();
+        let (c, _) = stats.samples(&design, 0, Some(4095)).unwrap();
+        let mut scratch = Vec::new();
+        for d in 0..2 {
+            let a = c.dir_sums(d, &t, true, true);
+            let b = c.dir_sums_body(d, &t, true, true, &mut scratch);
+            let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * x.abs().max(y.abs()).max(1.0);
+            for x in 0..NX {
+                assert!(close(a.e[x], b.e[x]) && close(a.y[x], b.y[x]), "{d} {x}");
+                for y in 0..NX {
+                    assert!(close(a.g[x][y], b.g[x][y]), "{d} {x} {y}");
+                }
+            }
+        }
+    }
 }
