@@ -363,7 +363,7 @@ struct SetAside {
 const MAX_SET_ASIDE: usize = 16 << 20;
 
 /// Full scales of 8…16-bit cameras.
-const FULL_SCALES: [u16; 5] = [255, 1023, 4095, 16383, 65535];
+pub(super) const FULL_SCALES: [u16; 5] = [255, 1023, 4095, 16383, 65535];
 
 /// The running sufficient statistics of every candidate pixel.
 pub struct CompactStats {
@@ -619,11 +619,6 @@ impl CompactStats {
     /// Sorts the set-aside samples by pixel; call once all frames are in.
     pub fn seal(&mut self) {
         self.set_aside.sort_unstable_by_key(|s| (s.pixel, s.frame));
-    }
-
-    /// Pixels held.
-    pub fn pixels(&self) -> usize {
-        self.counts.len()
     }
 
     /// Pixel `p`'s statistics with samples at 0 or at/above `saturation`

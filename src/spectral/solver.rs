@@ -6,7 +6,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::compact::{CompactStats, STATS_BLOCK};
+use super::compact::{CompactStats, FULL_SCALES, STATS_BLOCK};
 use super::init::SpectrumPlans;
 use super::model::{Axis, Design, FrameMeta};
 use super::pixel::{fit_pixel, fit_samples, PixelContext, PixelFits, Scored};
@@ -143,6 +143,8 @@ pub struct SpectralSolver {
     plans: SpectrumPlans,
     prior: TracedView,
     candidates: Vec<u32>,
+    /// Per candidate, the back-minus-front offset borrowed at the rim.
+    borrowed: Vec<Option<[f64; 2]>>,
     series: Vec<u16>,
     stats: Option<Box<CompactStats>>,
     block: Vec<u16>,
@@ -179,6 +181,7 @@ impl SpectralSolver {
             let w = prior.width as u32;
             candidates.retain(|&p| (x0..x1).contains(&(p % w)) && (y0..y1).contains(&(p / w)));
         }
+        let borrowed = borrowed_offsets(&prior, &candidates, i64::from(config.margin_px));
         let series_bytes = candidates.len() * frames.len() * 2;
         let use_stats = match config.engine {
             Engine::Series => false,
@@ -196,7 +199,8 @@ impl SpectralSolver {
         }
         let stats = if use_stats {
             let kappa0 = kappa_start(&config, &design);
-            let (centres, band) = band_centres(&design, &prior, &candidates, &config, &plans);
+            let (centres, band) =
+                band_centres(&design, &prior, &candidates, &borrowed, &config, &plans);
             let stats = CompactStats::new(
                 &design,
                 &centres,
@@ -227,6 +231,7 @@ impl SpectralSolver {
             block: Vec::with_capacity(block_len * candidates.len()),
             block_start: 0,
             candidates,
+            borrowed,
             design,
             plans,
             prior,
@@ -326,12 +331,9 @@ impl SpectralSolver {
     }
 
     fn saturation(&self) -> Option<u16> {
-        self.config.saturation_counts.or_else(|| {
-            [8u32, 10, 12, 14, 16]
-                .iter()
-                .map(|&b| ((1u32 << b) - 1) as u16)
-                .find(|&fs| fs == self.max_seen)
-        })
+        self.config
+            .saturation_counts
+            .or_else(|| FULL_SCALES.into_iter().find(|&fs| fs == self.max_seen))
     }
 
     /// Fits every pixel (all cores) once all frames are in.
@@ -361,17 +363,12 @@ impl SpectralSolver {
         }
         let sat = self.saturation();
         let kappa0 = kappa_start(&self.config, &self.design);
-        let borrowed = borrowed_offsets(
-            &self.prior,
-            &self.candidates,
-            i64::from(self.config.margin_px),
-        );
         let batch = FitBatch {
             design: &self.design,
             plans: &self.plans,
             prior: &self.prior,
             candidates: &self.candidates,
-            borrowed: &borrowed,
+            borrowed: &self.borrowed,
             series: &self.series,
             stats: self.stats.as_deref(),
             saturation: sat,
@@ -688,12 +685,12 @@ fn band_centres(
     design: &Design,
     prior: &TracedView,
     candidates: &[u32],
+    borrowed: &[Option<[f64; 2]>],
     config: &SpectralConfig,
     plans: &SpectrumPlans,
 ) -> (Vec<Vec<f64>>, Vec<f64>) {
     let w = prior.width as i64;
     let h = prior.height as i64;
-    let borrowed = borrowed_offsets(prior, candidates, i64::from(config.margin_px));
     let points = |k: usize, borrow: Option<[f64; 2]>| -> Vec<[f64; 2]> {
         let p = &prior.pixels[k];
         let mut pts = Vec::new();
