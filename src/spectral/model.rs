@@ -92,7 +92,7 @@ impl Params {
         false
     }
 
-    fn add(&self, d: &DVector<f64>) -> Params {
+    pub(crate) fn add(&self, d: &DVector<f64>) -> Params {
         let mut p = *self;
         let k = self.k;
         p.offset += d[0];
@@ -345,23 +345,45 @@ const RSS_TOL: f64 = 1e-11;
 /// down linearly, after a few steps instead of ~15.
 const CHI2_TOL: f64 = 1e-3;
 
+/// Damping up to which the linearised model is trusted to predict a step's
+/// decrease (LM starts at 1e-3 and divides by 3 after each accepted step).
+const TRUSTED_LAMBDA: f64 = 1e-2;
+
 /// Levenberg–Marquardt with Marquardt's diagonal scaling from `start`.
+///
+/// Converged when a step lowered χ² by less than [`CHI2_TOL`] (or the RSS
+/// by [`RSS_TOL`] relative, or moved every point by less than
+/// [`STEP_TOL_PX`]) — or when the next step, at a damping where the
+/// linearisation is trusted, is predicted to: then the current point is the
+/// fit and the evaluation that would only confirm it is saved (one of the
+/// 3–6 per fit). The prediction is the Gauss–Newton model's own decrease,
+/// `2 sᵀJᵀr − sᵀJᵀJ s`, which near the minimum is the actual one.
 pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_iter: usize) -> Fit {
     let mut p = start;
     let mut ne = data.normal(&p);
     let mut lambda = 1e-3;
     let mut converged = false;
     let mut iterations = 0;
+    let dof = (data.count().saturating_sub(p.len())).max(1) as f64;
+    let tol = |rss: f64| (RSS_TOL * rss).max(CHI2_TOL * rss / dof).max(1e-300);
     while iterations < max_iter {
-        iterations += 1;
         let mut a = ne.jtj.clone();
         for d in 0..a.nrows() {
             a[(d, d)] += lambda * ne.jtj[(d, d)].max(1e-300);
         }
         let Some(step) = a.cholesky().map(|c| c.solve(&ne.jtr)) else {
+            iterations += 1;
             lambda *= 10.0;
             continue;
         };
+        if lambda <= TRUSTED_LAMBDA && ne.rss.is_finite() {
+            let predicted = 2.0 * step.dot(&ne.jtr) - (&ne.jtj * &step).dot(&step);
+            if predicted <= tol(ne.rss) {
+                converged = true;
+                break;
+            }
+        }
+        iterations += 1;
         let trial = p.add(&step);
         let trial_ne = data.normal(&trial);
         if trial_ne.rss.is_finite() && trial_ne.rss <= ne.rss {
@@ -369,9 +391,7 @@ pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_ite
                 let u = trial.u_index(j);
                 step[u].abs() < STEP_TOL_PX && step[u + 1].abs() < STEP_TOL_PX
             });
-            let sigma2 = trial_ne.rss / (data.count().saturating_sub(p.len())).max(1) as f64;
-            let small_change =
-                (ne.rss - trial_ne.rss) <= (RSS_TOL * ne.rss).max(CHI2_TOL * sigma2).max(1e-300);
+            let small_change = (ne.rss - trial_ne.rss) <= tol(trial_ne.rss);
             p = trial;
             ne = trial_ne;
             lambda = (lambda / 3.0).max(1e-12);
@@ -395,6 +415,36 @@ pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_ite
         iterations,
         converged,
     }
+}
+
+/// One Gauss–Newton step from `start`, evaluated: the fit after it, and the
+/// decrease the linearisation there predicts for one more step (`Jᵀr ·
+/// (JᵀJ)⁻¹Jᵀr`). `None` when the step raises the RSS or JᵀJ is singular.
+pub fn gauss_newton_step<S: Samples + ?Sized>(data: &S, start: Params) -> Option<(Fit, f64)> {
+    let ne = data.normal(&start);
+    if !ne.rss.is_finite() {
+        return None;
+    }
+    let step = ne.jtj.clone().cholesky()?.solve(&ne.jtr);
+    let p = start.add(&step);
+    let at = data.normal(&p);
+    if !(at.rss.is_finite() && at.rss <= ne.rss) {
+        return None;
+    }
+    let next = at.jtj.clone().cholesky()?.solve(&at.jtr);
+    let remaining = at.jtr.dot(&next).max(0.0);
+    let dof = (data.count().saturating_sub(p.len())).max(1) as f64;
+    let converged = remaining <= (RSS_TOL * at.rss).max(CHI2_TOL * at.rss / dof);
+    Some((
+        Fit {
+            params: p,
+            rss: at.rss,
+            jtj: at.jtj,
+            iterations: 1,
+            converged,
+        },
+        remaining,
+    ))
 }
 
 /// `exp(−κ τ_i²)` of the frames in `index`: the envelope [`linear_amplitudes_in`]

@@ -8,7 +8,8 @@ use nalgebra::DMatrix;
 
 use super::init::SpectrumPlans;
 use super::model::{
-    levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples, MAX_REFLECTIONS,
+    gauss_newton_step, levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples,
+    MAX_REFLECTIONS,
 };
 use super::{flags, PixelResult};
 use crate::trace::PixelPaths;
@@ -123,6 +124,17 @@ fn pair_start<S: Samples + ?Sized>(
 struct Candidate {
     fit: Fit,
     bic: f64,
+    /// (JᵀJ)⁻¹: the covariance at unit noise.
+    inv: Option<DMatrix<f64>>,
+}
+
+/// The inverse of a symmetric positive definite matrix (Cholesky), or of
+/// any invertible one (LU) when it is not.
+fn spd_inverse(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    match m.clone().cholesky() {
+        Some(c) => Some(c.inverse()),
+        None => m.clone().try_inverse(),
+    }
 }
 
 fn fit_from<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, starts: &[Params]) -> Candidate {
@@ -141,10 +153,15 @@ fn fit_from<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, starts: &[Params]
         })
         .copied()
         .expect("at least one start");
-    let fit = levenberg_marquardt(data, best_start, ctx.max_iter);
+    candidate(data, levenberg_marquardt(data, best_start, ctx.max_iter))
+}
+
+/// A fit with its BIC, `N ln(RSS/N) + p ln N`.
+fn candidate<S: Samples + ?Sized>(data: &S, fit: Fit) -> Candidate {
     let n = data.count() as f64;
     let bic = n * (fit.rss / n).max(1e-300).ln() + fit.params.len() as f64 * n.ln();
-    Candidate { fit, bic }
+    let inv = spd_inverse(&fit.jtj);
+    Candidate { fit, bic, inv }
 }
 
 fn offset(prior: &PixelPaths, a: usize, b: usize) -> Option<[f64; 2]> {
@@ -174,6 +191,16 @@ pub struct PixelFits {
     pub base: PixelResult,
 }
 
+impl PixelFits {
+    /// No model, no flags (a placeholder).
+    pub fn none() -> Self {
+        PixelFits {
+            per_model: [None; MAX_REFLECTIONS],
+            base: PixelResult::empty(),
+        }
+    }
+}
+
 /// Fits one pixel with one, two and (when allowed) three reflections. `y`
 /// is indexed by frame, NaN where a sample is excluded.
 pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> PixelFits {
@@ -187,6 +214,62 @@ pub fn fit_samples<S: Samples + ?Sized>(
     data: &S,
     excluded: usize,
 ) -> PixelFits {
+    fit_samples_seeded(ctx, data, excluded, None).0
+}
+
+/// What a pixel whose two reflections were found hands the next pixel of
+/// its camera row: its one- and two-reflection fits (front first) and the
+/// station's prediction there, so that the neighbour's fits start where
+/// this pixel's ended, moved by the prediction's change.
+#[derive(Debug, Clone, Copy)]
+pub struct Seed {
+    one: Params,
+    two: Params,
+    front: [f64; 2],
+    back: [f64; 2],
+    /// The two-reflection fit's noise variance, counts².
+    sigma2: f64,
+    /// The last separability σ at unit noise computed along the row, the
+    /// merged amplitude it was computed at, and pixels since.
+    unit_sd: Option<(f64, f64, u32)>,
+}
+
+/// A warm pixel may reuse the separability σ of a pixel at most this many
+/// places before it in its row (then it is computed again).
+const UNIT_SD_REUSE: u32 = 32;
+
+/// The warm path accepts a pixel's fits only if its noise variance is within
+/// this factor of the seed's. Adjacent pixels see nearly the same intensity,
+/// so their read and shot noise agree to a few percent (the variance
+/// estimate itself scatters by √(2/N) ≈ 3 % at N = 2000); a fit in a wrong
+/// basin leaves the misfit in its residuals and fails this.
+const WARM_NOISE_RATIO: f64 = 1.2;
+
+/// Each warm amplitude must exceed this many of its standard deviations:
+/// far above detection (a periodogram peak [`DETECTION_RATIO`] times the
+/// median corresponds to ~6σ), so skipping the periodogram skips nothing.
+const WARM_AMPLITUDE_SIGMAS: f64 = 10.0;
+
+/// How many times the one-reflection fit's predicted next decrease its RSS
+/// may still fall, for the BIC comparison of the warm path: ten, where the
+/// geometric series of the remaining steps sums to ≤ 1.33 (ratio ¼).
+const WARM_GAIN_MARGIN: f64 = 10.0;
+
+/// [`fit_samples`], starting from a neighbour's fits when `seed` is given:
+/// two Gauss–Newton evaluations per model ([`gauss_newton_polish`]) instead
+/// of the spectral search and LM from its starts (~15 evaluations and two
+/// pair scans). The warm fits are kept only where the search would have
+/// stopped in the same place: both polishes converge, two reflections beat
+/// one by the BIC, both amplitudes are far above detection and the noise
+/// level matches the neighbour's ([`WARM_NOISE_RATIO`]); otherwise the pixel
+/// is searched from scratch. Returns the fits and, where both points were
+/// found, the seed for the next pixel.
+pub fn fit_samples_seeded<S: Samples + ?Sized>(
+    ctx: &PixelContext,
+    data: &S,
+    excluded: usize,
+    seed: Option<&Seed>,
+) -> (PixelFits, Option<Seed>) {
     let mut out = PixelFits {
         per_model: [None; MAX_REFLECTIONS],
         base: PixelResult::empty(),
@@ -196,32 +279,171 @@ pub fn fit_samples<S: Samples + ?Sized>(
     }
     if data.count() < 4 * (3 * MAX_REFLECTIONS + 2) {
         out.base.flags |= flags::NO_DATA;
-        return out;
+        return (out, None);
     }
+    let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
+    let warm = seed.and_then(|s| warm_fits(ctx, data, s));
+    let reuse = seed.filter(|_| warm.is_some()).and_then(|s| s.unit_sd);
+    let (one, two, three) = match warm {
+        Some((one, two)) => (one, Some(two), None),
+        None => match searched_fits(ctx, data, d12, &mut out.base) {
+            Some(fits) => fits,
+            None => return (out, None),
+        },
+    };
+    let merged = one.fit.params;
+    let next = two.as_ref().and_then(|two| {
+        let (Ok(f), Ok(b)) = (ctx.prior.front, ctx.prior.back) else {
+            return None;
+        };
+        let n = data.count();
+        Some(Seed {
+            one: one.fit.params,
+            two: two.fit.params,
+            front: [f.u, f.v],
+            back: [b.u, b.v],
+            sigma2: two.fit.rss / (n - two.fit.params.len()).max(1) as f64,
+            unit_sd: None,
+        })
+    });
+    // The expected pair's separation σ at unit noise: the same for every
+    // model (it is built on `merged`), so computed once. A warm pixel takes
+    // its row's last value, scaled by the merged amplitude (σ ∝ 1/B), where
+    // even twice that leaves the resolution test (RESOLVE_SIGMAS σ below
+    // the expected separation) passed at every model's noise level: there
+    // the approximation cannot change a decision.
+    let unit_sd = std::cell::OnceCell::new();
+    let mut carried = None;
+    if let (Some((sd0, amp0, age)), Some(d)) = (reuse, d12) {
+        let approx = sd0 * amp0 / merged.amp[0];
+        let n = data.count();
+        let worst = [Some(&one), two.as_ref()]
+            .into_iter()
+            .flatten()
+            .map(|c| c.fit.rss / (n - c.fit.params.len()).max(1) as f64)
+            .fold(0.0, f64::max);
+        if age < UNIT_SD_REUSE
+            && approx.is_finite()
+            && 2.0 * RESOLVE_SIGMAS * approx * worst.sqrt() < d[0].hypot(d[1])
+        {
+            let _ = unit_sd.set(approx);
+            carried = Some((sd0, amp0, age + 1));
+        }
+    }
+    for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
+        out.per_model[k] = cand.map(|c| Scored {
+            result: finalize(ctx, &c, data, d12, &merged, &unit_sd, out.base),
+            bic: c.bic,
+        });
+    }
+    let unit_sd = carried.or_else(|| unit_sd.get().map(|&v| (v, merged.amp[0], 0)));
+    // Seed the next pixel only from a pair found and reported, front first.
+    let next = out.per_model[1].and_then(|two| {
+        let r = two.result;
+        (r.model == 2 && r.s[1][0].is_finite()).then_some(())?;
+        let mut s = next?;
+        s.unit_sd = unit_sd;
+        let p = s.two;
+        let front_first = (p.uv[0][0] - r.s[0][0]).hypot(p.uv[0][1] - r.s[0][1])
+            <= (p.uv[1][0] - r.s[0][0]).hypot(p.uv[1][1] - r.s[0][1]);
+        if !front_first {
+            s.two.uv.swap(0, 1);
+            s.two.amp.swap(0, 1);
+        }
+        Some(s)
+    });
+    (out, next)
+}
+
+/// The one- and two-reflection fits started from the neighbour's, or `None`
+/// where the pixel must be searched (see [`fit_samples_seeded`]).
+fn warm_fits<S: Samples + ?Sized>(
+    ctx: &PixelContext,
+    data: &S,
+    seed: &Seed,
+) -> Option<(Candidate, Candidate)> {
+    if ctx.allow_third && ctx.prior.third.is_ok() {
+        return None;
+    }
+    let (Ok(f), Ok(b)) = (ctx.prior.front, ctx.prior.back) else {
+        return None;
+    };
+    let df = [f.u - seed.front[0], f.v - seed.front[1]];
+    let db = [b.u - seed.back[0], b.v - seed.back[1]];
+    let mut two = seed.two;
+    for c in 0..2 {
+        two.uv[0][c] += df[c];
+        two.uv[1][c] += db[c];
+    }
+    let w = two.amp[1] / (two.amp[0] + two.amp[1]);
+    let mut one = seed.one;
+    for c in 0..2 {
+        one.uv[0][c] += (1.0 - w) * df[c] + w * db[c];
+    }
+    let two = levenberg_marquardt(data, two, ctx.max_iter);
+    if !two.converged {
+        return None;
+    }
+    let two = candidate(data, two);
+    // One reflection: one Gauss–Newton step. Its only roles here are the
+    // BIC comparison and the merged signal's description, so it need not
+    // reach its minimum if two reflections win even against the lowest RSS
+    // it could still reach: further steps shrink geometrically (ratio ≲ ¼
+    // in practice), so less than WARM_GAIN_MARGIN × the predicted next
+    // decrease.
+    let (fit, remaining) = gauss_newton_step(data, one)?;
+    let one = candidate(data, fit);
+    let n = data.count() as f64;
+    let lowest = (one.fit.rss - WARM_GAIN_MARGIN * remaining).max(1e-300);
+    let bic_lowest = n * (lowest / n).ln() + one.fit.params.len() as f64 * n.ln();
+    if two.bic >= bic_lowest {
+        return None;
+    }
+    let p = two.fit.params;
+    let sigma2 = two.fit.rss / (n - p.len() as f64).max(1.0);
+    if sigma2 > WARM_NOISE_RATIO * seed.sigma2 {
+        return None;
+    }
+    let inv = two.inv.as_ref()?;
+    let detected = (0..2)
+        .all(|k| p.amp[k] > WARM_AMPLITUDE_SIGMAS * (inv[(1 + k, 1 + k)] * sigma2).max(0.0).sqrt());
+    detected.then_some((one, two))
+}
+
+/// The fits from the spectrum and the station geometry: the one-reflection
+/// fit from the periodogram's centre, the pair from the scans, the third
+/// reflection when allowed. `None` (with the reason in `base`) where no
+/// model applies.
+#[allow(clippy::type_complexity)]
+fn searched_fits<S: Samples + ?Sized>(
+    ctx: &PixelContext,
+    data: &S,
+    d12: Option<[f64; 2]>,
+    base: &mut PixelResult,
+) -> Option<(Candidate, Option<Candidate>, Option<Candidate>)> {
     let mut mus = Vec::new();
     for d in 0..ctx.design.axes.len() {
         match data.peak(d) {
             Some((mu, ratio)) if ratio >= DETECTION_RATIO && mu.is_nan() => {
-                out.base.flags |= flags::OUT_OF_BAND;
-                return out;
+                base.flags |= flags::OUT_OF_BAND;
+                return None;
             }
             Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(mu),
             _ => {
-                out.base.flags |= flags::NO_SIGNAL;
+                base.flags |= flags::NO_SIGNAL;
                 if data.band_limited() {
                     // No signal within the band: it may lie outside.
-                    out.base.flags |= flags::OUT_OF_BAND;
+                    base.flags |= flags::OUT_OF_BAND;
                 }
-                return out;
+                return None;
             }
         }
     }
     let Some(centre) = solve_centre(ctx, &mus) else {
-        out.base.flags |= flags::NO_DATA;
-        return out;
+        base.flags |= flags::NO_DATA;
+        return None;
     };
     let one = fit_from(ctx, data, &[start(1, &[centre], ctx.kappa0)]);
-    let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
     let mut two = None;
     let mut three = None;
     if let Some(d) = d12 {
@@ -249,17 +471,7 @@ pub fn fit_samples<S: Samples + ?Sized>(
         }
         two = Some(best);
     }
-    let merged = one.fit.params;
-    // The expected pair's separation σ at unit noise: the same for every
-    // model (it is built on `merged`), so computed once.
-    let unit_sd = std::cell::OnceCell::new();
-    for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
-        out.per_model[k] = cand.map(|c| Scored {
-            result: finalize(ctx, &c, data, d12, &merged, &unit_sd, out.base),
-            bic: c.bic,
-        });
-    }
-    out
+    Some((one, two, three))
 }
 
 /// The pixel's result under the candidate's model: labels from physics,
@@ -306,7 +518,7 @@ fn finalize<S: Samples + ?Sized>(
         out.flags |= flags::NOT_CONVERGED;
     }
     let sigma2 = fit.rss / (n - p.len()).max(1) as f64;
-    let cov = fit.jtj.clone().try_inverse().map(|m| m * sigma2);
+    let cov = cand.inv.as_ref().map(|m| m * sigma2);
     if p.k == 1 {
         out.flags |= flags::ONE_REFLECTION;
         // No back path predicted: the one reflection is the front.
@@ -401,11 +613,9 @@ fn expected_separation_std<S: Samples + ?Sized>(
     p.offset = fitted.offset;
     p.amp[0] = amp * (1.0 - w);
     p.amp[1] = amp * w;
-    data.information(&p)
-        .try_inverse()
-        .map_or(f64::INFINITY, |inv| {
-            separation_std(&(inv * sigma2), &p, 0, 1)
-        })
+    spd_inverse(&data.information(&p)).map_or(f64::INFINITY, |inv| {
+        separation_std(&(inv * sigma2), &p, 0, 1)
+    })
 }
 
 /// Smallest separation over the directions, in Fourier bins, of two screen

@@ -8,8 +8,9 @@ use rayon::prelude::*;
 
 use super::compact::{CompactStats, FULL_SCALES, STATS_BLOCK};
 use super::init::SpectrumPlans;
+use super::model::SeriesSamples;
 use super::model::{Axis, Design, FrameMeta};
-use super::pixel::{fit_pixel, fit_samples, PixelContext, PixelFits, Scored};
+use super::pixel::{fit_samples_seeded, PixelContext, PixelFits, Scored, Seed};
 use super::{flags, PixelResult};
 use crate::acquisition::FrameInfo;
 use crate::npy::{self, NpyError};
@@ -96,6 +97,10 @@ pub struct SpectralConfig {
     pub edge_margin_mm: f64,
     /// Levenberg–Marquardt iteration cap.
     pub max_iter: usize,
+    /// Start each pixel's fits from its left neighbour's where that one found
+    /// both points ([`super::pixel::fit_samples_seeded`]); `false`: search
+    /// every pixel from its spectrum.
+    pub warm_starts: bool,
     /// Only fit camera pixels in `[x0, x1) × [y0, y1)` (columns, rows).
     pub roi: Option<[u32; 4]>,
 }
@@ -111,6 +116,7 @@ impl Default for SpectralConfig {
             margin_px: 4,
             edge_margin_mm: DEFAULT_EDGE_MARGIN_MM,
             max_iter: 100,
+            warm_starts: true,
             roi: None,
         }
     }
@@ -375,6 +381,7 @@ impl SpectralSolver {
             kappa0,
             allow_third: self.config.third_reflection,
             max_iter: self.config.max_iter,
+            warm_starts: self.config.warm_starts,
         };
         let fits = backend.fit(&batch);
         if fits.len() != self.candidates.len() {
@@ -472,9 +479,47 @@ pub struct FitBatch<'a> {
     pub allow_third: bool,
     /// Levenberg–Marquardt iteration cap.
     pub max_iter: usize,
+    /// Whether a pixel's fits start from its left neighbour's ([`Self::fit_run`]).
+    pub warm_starts: bool,
 }
 
 impl FitBatch<'_> {
+    /// The candidates in runs of camera-row neighbours, in order: the units
+    /// of work ([`Self::fit_run`]).
+    pub fn runs(&self) -> Vec<std::ops::Range<usize>> {
+        let w = self.prior.width as u32;
+        let mut runs = Vec::new();
+        let mut from = 0;
+        for q in 1..=self.candidates.len() {
+            let adjacent = q < self.candidates.len() && {
+                let (a, b) = (self.candidates[q - 1], self.candidates[q]);
+                b == a + 1 && b % w != 0
+            };
+            if !adjacent {
+                runs.push(from..q);
+                from = q;
+            }
+        }
+        runs
+    }
+
+    /// The candidates of `run` (one of [`Self::runs`]) fitted in order, each
+    /// started from the fits of the one before where those found both
+    /// points and warm starts are on, else searched like [`Self::fit_one`].
+    pub fn fit_run(&self, run: std::ops::Range<usize>) -> Vec<PixelFits> {
+        let mut out = vec![PixelFits::none(); run.len()];
+        self.fit_run_into(run, &mut out);
+        out
+    }
+
+    fn fit_run_into(&self, run: std::ops::Range<usize>, out: &mut [PixelFits]) {
+        let mut seed = None;
+        for (q, o) in run.zip(out) {
+            let (fits, next) = self.fit_seeded(q, seed.as_ref().filter(|_| self.warm_starts));
+            *o = fits;
+            seed = next;
+        }
+    }
     /// Frames per series.
     pub fn frames(&self) -> usize {
         self.design.frames.len()
@@ -483,6 +528,10 @@ impl FitBatch<'_> {
     /// Candidate `q` fitted on this thread (the reference every backend must
     /// reproduce).
     pub fn fit_one(&self, q: usize) -> PixelFits {
+        self.fit_seeded(q, None).0
+    }
+
+    fn fit_seeded(&self, q: usize, seed: Option<&Seed>) -> (PixelFits, Option<Seed>) {
         let ctx = PixelContext {
             design: self.design,
             plans: self.plans,
@@ -494,14 +543,14 @@ impl FitBatch<'_> {
         };
         if let Some(stats) = self.stats {
             return match stats.samples(self.design, q, self.saturation) {
-                Some((data, excluded)) => fit_samples(&ctx, &data, excluded),
+                Some((data, excluded)) => fit_samples_seeded(&ctx, &data, excluded, seed),
                 None => {
                     let mut out = PixelFits {
                         per_model: [None; super::model::MAX_REFLECTIONS],
                         base: PixelResult::empty(),
                     };
                     out.base.flags = flags::SATURATED | flags::NO_DATA;
-                    out
+                    (out, None)
                 }
             };
         }
@@ -519,14 +568,17 @@ impl FitBatch<'_> {
                 }
             })
             .collect();
-        fit_pixel(&ctx, &y, excluded)
+        let data = SeriesSamples::new(ctx.design, ctx.plans, &y, ctx.kappa0);
+        fit_samples_seeded(&ctx, &data, excluded, seed)
     }
 }
 
-/// Where the per-pixel fits run. The pixels are independent, so the batch
-/// can go to any data-parallel device: this is the seam for a GPU (wgpu
-/// compute) backend, which must return one [`PixelFits`] per candidate, in
-/// order, matching [`FitBatch::fit_one`]. [`CpuFits`] is the path CI tests.
+/// Where the per-pixel fits run. The runs of row neighbours are independent
+/// (within a run, a pixel starts from the one before), so the batch can go to
+/// any data-parallel device: this is the seam for a GPU (wgpu compute)
+/// backend, which must return one [`PixelFits`] per candidate, in order,
+/// matching [`FitBatch::fit_run`] over [`FitBatch::runs`]. [`CpuFits`] is
+/// the path CI tests.
 pub trait FitBackend: Sync {
     /// Fits every candidate of `batch`.
     fn fit(&self, batch: &FitBatch) -> Vec<PixelFits>;
@@ -538,11 +590,20 @@ pub struct CpuFits;
 
 impl FitBackend for CpuFits {
     fn fit(&self, batch: &FitBatch) -> Vec<PixelFits> {
-        (0..batch.candidates.len())
-            .into_par_iter()
-            .with_min_len(16)
-            .map(|q| batch.fit_one(q))
-            .collect()
+        // Written in place, run by run: the results of a full sensor are
+        // ~1.3 GB, too much to hold twice.
+        let mut out = vec![PixelFits::none(); batch.candidates.len()];
+        let mut parts = Vec::new();
+        let mut rest = out.as_mut_slice();
+        for r in batch.runs() {
+            let (part, tail) = rest.split_at_mut(r.len());
+            parts.push((r, part));
+            rest = tail;
+        }
+        parts.into_par_iter().for_each(|(r, part)| {
+            batch.fit_run_into(r, part);
+        });
+        out
     }
 }
 
