@@ -806,17 +806,22 @@ fn dot2(a: &[f64], b: &[f64], c: &[f64], d: &[f64], sign: f64) -> f64 {
     let n = a.len().min(b.len()).min(c.len()).min(d.len());
     let (a, b, c, d) = (&a[..n], &b[..n], &c[..n], &d[..n]);
     let mut acc = [0.0f64; 4];
-    let mut j = 0;
-    while j + 4 <= n {
+    let quads = a
+        .chunks_exact(4)
+        .zip(b.chunks_exact(4))
+        .zip(c.chunks_exact(4).zip(d.chunks_exact(4)));
+    for ((a, b), (c, d)) in quads {
+        let a: &[f64; 4] = a.try_into().expect("four");
+        let b: &[f64; 4] = b.try_into().expect("four");
+        let c: &[f64; 4] = c.try_into().expect("four");
+        let d: &[f64; 4] = d.try_into().expect("four");
         for l in 0..4 {
-            acc[l] += a[j + l] * b[j + l] + sign * (c[j + l] * d[j + l]);
+            acc[l] += a[l] * b[l] + sign * (c[l] * d[l]);
         }
-        j += 4;
     }
     let mut tail = 0.0;
-    while j < n {
+    for j in n - n % 4..n {
         tail += a[j] * b[j] + sign * (c[j] * d[j]);
-        j += 1;
     }
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }

@@ -417,10 +417,14 @@ pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_ite
     }
 }
 
-/// One Gauss–Newton step from `start`, evaluated: the fit after it, and the
-/// decrease the linearisation there predicts for one more step (`Jᵀr ·
-/// (JᵀJ)⁻¹Jᵀr`). `None` when the step raises the RSS or JᵀJ is singular.
-pub fn gauss_newton_step<S: Samples + ?Sized>(data: &S, start: Params) -> Option<(Fit, f64)> {
+/// One Gauss–Newton step from `start`, evaluated: the fit after it, the
+/// next step from there and the decrease the linearisation predicts for it
+/// (`Jᵀr · (JᵀJ)⁻¹Jᵀr`). `None` when the step raises the RSS or JᵀJ is
+/// singular.
+pub fn gauss_newton_step<S: Samples + ?Sized>(
+    data: &S,
+    start: Params,
+) -> Option<(Fit, DVector<f64>, f64)> {
     let ne = data.normal(&start);
     if !ne.rss.is_finite() {
         return None;
@@ -443,6 +447,7 @@ pub fn gauss_newton_step<S: Samples + ?Sized>(data: &S, start: Params) -> Option
             iterations: 1,
             converged,
         },
+        next,
         remaining,
     ))
 }
