@@ -218,12 +218,11 @@ pub fn fit_samples<S: Samples + ?Sized>(
 }
 
 /// What a pixel whose two reflections were found hands the next pixel of
-/// its camera row: its one- and two-reflection fits (front first) and the
-/// station's prediction there, so that the neighbour's fits start where
-/// this pixel's ended, moved by the prediction's change.
+/// its camera row: its two-reflection fit (front first) and the station's
+/// prediction there, so that the neighbour's fit starts where this pixel's
+/// ended, moved by the prediction's change.
 #[derive(Debug, Clone, Copy)]
 pub struct Seed {
-    one: Params,
     two: Params,
     front: [f64; 2],
     back: [f64; 2],
@@ -245,15 +244,14 @@ const UNIT_SD_REUSE: u32 = 32;
 /// basin leaves the misfit in its residuals and fails this.
 const WARM_NOISE_RATIO: f64 = 1.2;
 
-/// Each warm amplitude must exceed this many of its standard deviations:
-/// far above detection (a periodogram peak [`DETECTION_RATIO`] times the
-/// median corresponds to ~6σ), so skipping the periodogram skips nothing.
+/// Each warm amplitude must exceed this many of its standard deviations.
+/// That is far above detection (a periodogram peak [`DETECTION_RATIO`]
+/// times the median corresponds to ~6σ), so skipping the periodogram skips
+/// nothing; and it decides one against two reflections more strictly than
+/// the BIC, whose penalty for the second reflection's three parameters,
+/// 3 ln N ≈ 23 at N = 2000, is met by a Wald statistic z² = 23 (z ≈ 4.8):
+/// where the weaker amplitude is ≥ 10σ, the one-reflection fit is not needed.
 const WARM_AMPLITUDE_SIGMAS: f64 = 10.0;
-
-/// How many times the one-reflection fit's predicted next decrease its RSS
-/// may still fall, for the BIC comparison of the warm path: ten, where the
-/// geometric series of the remaining steps sums to ≤ 1.33 (ratio ¼).
-const WARM_GAIN_MARGIN: f64 = 10.0;
 
 /// The warm pair's second Gauss–Newton step is taken without evaluating
 /// its end point where it is predicted to lower χ² by less than this: a
@@ -264,18 +262,17 @@ const WARM_GAIN_MARGIN: f64 = 10.0;
 const ONE_STEP_CHI2: f64 = 0.1;
 
 /// [`fit_samples`], starting from a neighbour's fits when `seed` is given,
-/// moved by the change of the station's prediction: for the pair, one
-/// evaluated Gauss–Newton step and a second one taken unevaluated where it
-/// is small ([`ONE_STEP_CHI2`]; LM from there otherwise); for the single
-/// reflection, one evaluated step — 4 evaluations instead of the ~15 and
-/// two pair scans of the search from the spectrum. The warm fits are kept
-/// only where the search would have ended in the same place: two
-/// reflections beat one by the BIC even against what further steps could
-/// gain ([`WARM_GAIN_MARGIN`]), both amplitudes are far above detection
-/// ([`WARM_AMPLITUDE_SIGMAS`]) and the noise level matches the
-/// neighbour's ([`WARM_NOISE_RATIO`]); otherwise the pixel is searched from
-/// scratch. Returns the fits and, where both points were found, the seed
-/// for the next pixel.
+/// moved by the change of the station's prediction: one evaluated
+/// Gauss–Newton step for the pair and a second one taken unevaluated where
+/// it is small ([`ONE_STEP_CHI2`]; LM from there otherwise) — 2 evaluations
+/// instead of the ~15 and two pair scans of the search from the spectrum.
+/// The warm fit is kept only where the search would have ended in the same
+/// place: both amplitudes far above detection and above what the BIC asks
+/// of a second reflection ([`WARM_AMPLITUDE_SIGMAS`]; the one-reflection
+/// model is then not fitted, and the scene's BIC is summed over the searched
+/// pixels) and the noise level the neighbour's ([`WARM_NOISE_RATIO`]);
+/// otherwise the pixel is searched from scratch. Returns the fits and,
+/// where both points were found, the seed for the next pixel.
 pub fn fit_samples_seeded<S: Samples + ?Sized>(
     ctx: &PixelContext,
     data: &S,
@@ -297,20 +294,35 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
     let warm = seed.and_then(|s| warm_fits(ctx, data, s));
     let reuse = seed.filter(|_| warm.is_some()).and_then(|s| s.unit_sd);
     let (one, two, three) = match warm {
-        Some((one, two)) => (one, Some(two), None),
+        Some(two) => (None, Some(two), None),
         None => match searched_fits(ctx, data, d12, &mut out.base) {
-            Some(fits) => fits,
+            Some((one, two, three)) => (Some(one), two, three),
             None => return (out, None),
         },
     };
-    let merged = one.fit.params;
+    // The pixel's signal as one reflection: the one-reflection fit, or on a
+    // warm pixel the pair's amplitude-weighted centre and total amplitude.
+    let merged = match (&one, &two) {
+        (Some(one), _) => one.fit.params,
+        (None, Some(two)) => {
+            let p = two.fit.params;
+            let b = p.amp[0] + p.amp[1];
+            let mut m = start(1, &[[0.0; 2]], p.kappa);
+            m.offset = p.offset;
+            m.amp[0] = b;
+            for c in 0..2 {
+                m.uv[0][c] = (p.amp[0] * p.uv[0][c] + p.amp[1] * p.uv[1][c]) / b;
+            }
+            m
+        }
+        (None, None) => unreachable!("a warm pixel has its pair"),
+    };
     let next = two.as_ref().and_then(|two| {
         let (Ok(f), Ok(b)) = (ctx.prior.front, ctx.prior.back) else {
             return None;
         };
         let n = data.count();
         Some(Seed {
-            one: one.fit.params,
             two: two.fit.params,
             front: [f.u, f.v],
             back: [b.u, b.v],
@@ -329,7 +341,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
     if let (Some((sd0, amp0, age)), Some(d)) = (reuse, d12) {
         let approx = sd0 * amp0 / merged.amp[0];
         let n = data.count();
-        let worst = [Some(&one), two.as_ref()]
+        let worst = [one.as_ref(), two.as_ref()]
             .into_iter()
             .flatten()
             .map(|c| c.fit.rss / (n - c.fit.params.len()).max(1) as f64)
@@ -342,7 +354,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             carried = Some((sd0, amp0, age + 1));
         }
     }
-    for (k, cand) in [Some(one), two, three].into_iter().enumerate() {
+    for (k, cand) in [one, two, three].into_iter().enumerate() {
         out.per_model[k] = cand.map(|c| Scored {
             result: finalize(ctx, &c, data, d12, &merged, &unit_sd, out.base),
             bic: c.bic,
@@ -367,30 +379,19 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
     (out, next)
 }
 
-/// The one- and two-reflection fits started from the neighbour's, or `None`
-/// where the pixel must be searched (see [`fit_samples_seeded`]).
-fn warm_fits<S: Samples + ?Sized>(
-    ctx: &PixelContext,
-    data: &S,
-    seed: &Seed,
-) -> Option<(Candidate, Candidate)> {
+/// The two-reflection fit started from the neighbour's, or `None` where the
+/// pixel must be searched (see [`fit_samples_seeded`]).
+fn warm_fits<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, seed: &Seed) -> Option<Candidate> {
     if ctx.allow_third && ctx.prior.third.is_ok() {
         return None;
     }
     let (Ok(f), Ok(b)) = (ctx.prior.front, ctx.prior.back) else {
         return None;
     };
-    let df = [f.u - seed.front[0], f.v - seed.front[1]];
-    let db = [b.u - seed.back[0], b.v - seed.back[1]];
     let mut two = seed.two;
     for c in 0..2 {
-        two.uv[0][c] += df[c];
-        two.uv[1][c] += db[c];
-    }
-    let w = two.amp[1] / (two.amp[0] + two.amp[1]);
-    let mut one = seed.one;
-    for c in 0..2 {
-        one.uv[0][c] += (1.0 - w) * df[c] + w * db[c];
+        two.uv[0][c] += [f.u, f.v][c] - seed.front[c];
+        two.uv[1][c] += [b.u, b.v][c] - seed.back[c];
     }
     let n = data.count() as f64;
     let (fit, next, remaining) = gauss_newton_step(data, two)?;
@@ -413,19 +414,6 @@ fn warm_fits<S: Samples + ?Sized>(
         fit
     };
     let two = candidate(data, two);
-    // One reflection: one Gauss–Newton step. Its only roles here are the
-    // BIC comparison and the merged signal's description, so it need not
-    // reach its minimum if two reflections win even against the lowest RSS
-    // it could still reach: further steps shrink geometrically (ratio ≲ ¼
-    // in practice), so less than WARM_GAIN_MARGIN × the predicted next
-    // decrease.
-    let (fit, _, remaining) = gauss_newton_step(data, one)?;
-    let one = candidate(data, fit);
-    let lowest = (one.fit.rss - WARM_GAIN_MARGIN * remaining).max(1e-300);
-    let bic_lowest = n * (lowest / n).ln() + one.fit.params.len() as f64 * n.ln();
-    if two.bic >= bic_lowest {
-        return None;
-    }
     let p = two.fit.params;
     let sigma2 = two.fit.rss / (n - p.len() as f64).max(1.0);
     if sigma2 > WARM_NOISE_RATIO * seed.sigma2 {
@@ -434,7 +422,7 @@ fn warm_fits<S: Samples + ?Sized>(
     let inv = two.inv.as_ref()?;
     let detected = (0..2)
         .all(|k| p.amp[k] > WARM_AMPLITUDE_SIGMAS * (inv[(1 + k, 1 + k)] * sigma2).max(0.0).sqrt());
-    detected.then_some((one, two))
+    detected.then_some(two)
 }
 
 /// The fits from the spectrum and the station geometry: the one-reflection
