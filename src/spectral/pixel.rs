@@ -9,7 +9,7 @@ use nalgebra::DMatrix;
 use super::init::SpectrumPlans;
 use super::model::{
     gauss_newton_step, levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples,
-    MAX_REFLECTIONS,
+    SmallCholesky, MAX_REFLECTIONS,
 };
 use super::{flags, PixelResult};
 use crate::trace::PixelPaths;
@@ -131,7 +131,7 @@ struct Candidate {
 /// The inverse of a symmetric positive definite matrix (Cholesky), or of
 /// any invertible one (LU) when it is not.
 fn spd_inverse(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    match m.clone().cholesky() {
+    match SmallCholesky::new(m) {
         Some(c) => Some(c.inverse()),
         None => m.clone().try_inverse(),
     }

@@ -394,41 +394,54 @@ impl SpectralSolver {
             });
         }
         let (scene_model, bic_sums) = scene_model(&fits, self.config.third_reflection);
-        let mut pixels = vec![
-            PixelResult {
-                flags: flags::NO_DATA,
-                ..PixelResult::empty()
-            };
-            self.width * self.height
-        ];
-        let mut preferred = vec![0u8; self.width * self.height];
-        for (&p, fits) in self.candidates.iter().zip(&fits) {
-            let own = |models: &[Option<Scored>]| {
-                models
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(k, c)| c.map(|c| (k, c)))
-                    .min_by(|a, b| a.1.bic.total_cmp(&b.1.bic))
-            };
-            // The scene's model where it applies; where the geometry allows
-            // fewer reflections (the back path leaves through the rim), the
-            // largest model that applies. Where the flat plate's back path
-            // leaves through the rim but the real one may not (the offset is
-            // borrowed), the pixel's own BIC decides.
-            let rim = self.prior.pixels[p as usize].back.is_err();
-            let chosen = if rim {
-                own(&fits.per_model[..scene_model]).map(|(_, c)| c)
-            } else {
-                fits.per_model[..scene_model]
-                    .iter()
-                    .rev()
-                    .flatten()
-                    .next()
-                    .copied()
-            };
-            pixels[p as usize] = chosen.map_or(fits.base, |c| c.result);
-            preferred[p as usize] = own(&fits.per_model).map_or(0, |(k, _)| k as u8 + 1);
+        // Every camera pixel's answer, in parallel: its candidate's chosen
+        // model, or no data.
+        let mut index = vec![u32::MAX; self.width * self.height];
+        for (q, &p) in self.candidates.iter().enumerate() {
+            index[p as usize] = q as u32;
         }
+        let own = |models: &[Option<Scored>]| {
+            models
+                .iter()
+                .enumerate()
+                .filter_map(|(k, c)| c.map(|c| (k, c)))
+                .min_by(|a, b| a.1.bic.total_cmp(&b.1.bic))
+        };
+        let (pixels, preferred): (Vec<PixelResult>, Vec<u8>) = index
+            .par_iter()
+            .enumerate()
+            .map(|(p, &q)| {
+                let Some(fits) = fits.get(q as usize) else {
+                    let none = PixelResult {
+                        flags: flags::NO_DATA,
+                        ..PixelResult::empty()
+                    };
+                    return (none, 0);
+                };
+                // The scene's model where it applies; where the geometry
+                // allows fewer reflections (the back path leaves through the
+                // rim), the largest model that applies. Where the flat
+                // plate's back path leaves through the rim but the real one
+                // may not (the offset is borrowed), the pixel's own BIC decides.
+                let rim = self.prior.pixels[p].back.is_err();
+                let chosen = if rim {
+                    own(&fits.per_model[..scene_model]).map(|(_, c)| c)
+                } else {
+                    fits.per_model[..scene_model]
+                        .iter()
+                        .rev()
+                        .flatten()
+                        .next()
+                        .copied()
+                };
+                (
+                    chosen.map_or(fits.base, |c| c.result),
+                    own(&fits.per_model).map_or(0, |(k, _)| k as u8 + 1),
+                )
+            })
+            .unzip();
+        // The fits (~1 kB per pixel) are freed off the caller's path.
+        std::thread::spawn(move || drop(fits));
         Ok(SpectralMaps {
             width: self.width,
             height: self.height,
@@ -592,7 +605,11 @@ impl FitBackend for CpuFits {
     fn fit(&self, batch: &FitBatch) -> Vec<PixelFits> {
         // Written in place, run by run: the results of a full sensor are
         // ~1.3 GB, too much to hold twice.
-        let mut out = vec![PixelFits::none(); batch.candidates.len()];
+        let mut out = Vec::with_capacity(batch.candidates.len());
+        out.par_extend(rayon::iter::repeat_n(
+            PixelFits::none(),
+            batch.candidates.len(),
+        ));
         let mut parts = Vec::new();
         let mut rest = out.as_mut_slice();
         for r in batch.runs() {
@@ -612,14 +629,24 @@ impl FitBackend for CpuFits {
 /// log-likelihoods add up over the scene). Returns it with the sums.
 fn scene_model(results: &[PixelFits], allow_third: bool) -> (usize, [f64; 3]) {
     let top = if allow_third { 3 } else { 2 };
-    let mut sums = [0.0; 3];
-    for f in results {
-        if f.per_model[..top].iter().all(Option::is_some) {
-            for (k, c) in f.per_model[..top].iter().enumerate() {
-                sums[k] += c.map_or(0.0, |c| c.bic);
+    // Fixed chunks, summed in order: the same sums on every run.
+    let partial: Vec<[f64; 3]> = results
+        .par_chunks(4096)
+        .map(|chunk| {
+            let mut sums = [0.0; 3];
+            for f in chunk {
+                if f.per_model[..top].iter().all(Option::is_some) {
+                    for (k, c) in f.per_model[..top].iter().enumerate() {
+                        sums[k] += c.map_or(0.0, |c| c.bic);
+                    }
+                }
             }
-        }
-    }
+            sums
+        })
+        .collect();
+    let sums = partial
+        .iter()
+        .fold([0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]]);
     let best = (1..top).fold(0, |b, k| if sums[k] < sums[b] { k } else { b });
     // With no pixel fitted under every model, fall back to the largest.
     let chosen = if sums.iter().all(|&v| v == 0.0) {
