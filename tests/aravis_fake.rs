@@ -157,6 +157,12 @@ fn measure_over_the_fake_camera_reconstructs() {
         "100",
         "--exposure-us",
         "500",
+        // The fake camera shows its own test pattern, not the fringes: the
+        // spectral stage's answers there are not screen points, and whether
+        // the surface stage finds enough of them is chance (with warm
+        // starts it stops with "joint: 0 measured values for 4 unknowns").
+        // The acquisition path and the spectral maps are what this tests.
+        "--no-surfaces",
     ]);
     let log = format!(
         "{}{}",

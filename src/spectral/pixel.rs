@@ -244,6 +244,13 @@ const UNIT_SD_REUSE: u32 = 32;
 /// basin leaves the misfit in its residuals and fails this.
 const WARM_NOISE_RATIO: f64 = 1.2;
 
+/// A warm pixel's amplitudes and falloff κ must lie within this fraction of
+/// its neighbour's: they follow the illumination and the optics, smooth
+/// across one camera pixel, and a 10σ amplitude carries ≤ 10 % of noise
+/// (typically ~1 %). Where they jump, the data do not follow the smooth
+/// scene the warm start assumes, and the pixel is searched.
+const WARM_CHANGE: f64 = 0.2;
+
 /// Each warm amplitude must exceed this many of its standard deviations.
 /// That is far above detection (a periodogram peak [`DETECTION_RATIO`]
 /// times the median corresponds to ~6σ), so skipping the periodogram skips
@@ -417,6 +424,11 @@ fn warm_fits<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, seed: &Seed) -> 
     let p = two.fit.params;
     let sigma2 = two.fit.rss / (n - p.len() as f64).max(1.0);
     if sigma2 > WARM_NOISE_RATIO * seed.sigma2 {
+        return None;
+    }
+    let near = |a: f64, b: f64| (a - b).abs() <= WARM_CHANGE * b.abs();
+    let q = &seed.two;
+    if !(near(p.amp[0], q.amp[0]) && near(p.amp[1], q.amp[1]) && near(p.kappa, q.kappa)) {
         return None;
     }
     let inv = two.inv.as_ref()?;
