@@ -798,32 +798,68 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// `Σ a_j b_j + sign · Σ c_j d_j` with four partial sums per term, so that
-/// the sums vectorise (a floating-point reduction is not reordered
-/// otherwise).
+/// `Σ_j wr_j c^re_{y,j} + sign · wi_j c^im_{y,j}` for the `n` columns
+/// `y = y0 … y0 + n − 1` of `cre`/`cim` (rows of length `q`), in one pass
+/// over the nodes, four at a time with `n` accumulators in registers.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn dot2(a: &[f64], b: &[f64], c: &[f64], d: &[f64], sign: f64) -> f64 {
-    let n = a.len().min(b.len()).min(c.len()).min(d.len());
-    let (a, b, c, d) = (&a[..n], &b[..n], &c[..n], &d[..n]);
-    let mut acc = [0.0f64; 4];
-    let quads = a
-        .chunks_exact(4)
-        .zip(b.chunks_exact(4))
-        .zip(c.chunks_exact(4).zip(d.chunks_exact(4)));
-    for ((a, b), (c, d)) in quads {
-        let a: &[f64; 4] = a.try_into().expect("four");
-        let b: &[f64; 4] = b.try_into().expect("four");
-        let c: &[f64; 4] = c.try_into().expect("four");
-        let d: &[f64; 4] = d.try_into().expect("four");
-        for l in 0..4 {
-            acc[l] += a[l] * b[l] + sign * (c[l] * d[l]);
+fn row_dots(
+    n: usize,
+    wr: &[f64],
+    wi: &[f64],
+    sign: f64,
+    cre: &[f64],
+    cim: &[f64],
+    q: usize,
+    y0: usize,
+) -> [f64; NX] {
+    #[inline(always)]
+    fn fixed<const N: usize>(
+        wr: &[f64],
+        wi: &[f64],
+        sign: f64,
+        cre: &[f64],
+        cim: &[f64],
+        q: usize,
+        y0: usize,
+    ) -> [f64; NX] {
+        let mut acc = [[0.0f64; 4]; N];
+        let quads = q - q % 4;
+        let mut j = 0;
+        while j < quads {
+            let a: &[f64; 4] = wr[j..j + 4].try_into().expect("four");
+            let b: &[f64; 4] = wi[j..j + 4].try_into().expect("four");
+            for (t, acc) in acc.iter_mut().enumerate() {
+                let o = (y0 + t) * q + j;
+                let c: &[f64; 4] = cre[o..o + 4].try_into().expect("four");
+                let d: &[f64; 4] = cim[o..o + 4].try_into().expect("four");
+                for l in 0..4 {
+                    acc[l] += a[l] * c[l] + sign * (b[l] * d[l]);
+                }
+            }
+            j += 4;
         }
+        let mut out = [0.0; NX];
+        for (t, acc) in acc.iter().enumerate() {
+            let o = (y0 + t) * q;
+            let mut tail = 0.0;
+            for j in quads..q {
+                tail += wr[j] * cre[o + j] + sign * (wi[j] * cim[o + j]);
+            }
+            out[t] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail;
+        }
+        out
     }
-    let mut tail = 0.0;
-    for j in n - n % 4..n {
-        tail += a[j] * b[j] + sign * (c[j] * d[j]);
+    match n {
+        1 => fixed::<1>(wr, wi, sign, cre, cim, q, y0),
+        2 => fixed::<2>(wr, wi, sign, cre, cim, q, y0),
+        3 => fixed::<3>(wr, wi, sign, cre, cim, q, y0),
+        4 => fixed::<4>(wr, wi, sign, cre, cim, q, y0),
+        5 => fixed::<5>(wr, wi, sign, cre, cim, q, y0),
+        6 => fixed::<6>(wr, wi, sign, cre, cim, q, y0),
+        7 => fixed::<7>(wr, wi, sign, cre, cim, q, y0),
+        _ => fixed::<8>(wr, wi, sign, cre, cim, q, y0),
     }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Columns of one direction: `a_k` (B_k), `β_k` (μ_k), the κ column and the
@@ -999,22 +1035,18 @@ impl CompactSamples<'_> {
             e: [0.0; NX],
             y: [0.0; NX],
         };
+        // One pass over the nodes per weight row: the constant's and the
+        // data's against every column, each weighted column against the
+        // columns from its own on (the upper triangle) — each row loaded
+        // once per pass, not once per product.
+        out.e = row_dots(nc, &pd.ez_re, &pd.ez_im, -1.0, cre, cim, q, 0);
+        if data {
+            out.y = row_dots(nc, &pd.zg_re, &pd.zg_im, -1.0, cre, cim, q, 0);
+        }
         for x in 0..nc {
-            let (xr, xi) = (&cre[x * q..(x + 1) * q], &cim[x * q..(x + 1) * q]);
-            out.e[x] = dot2(&pd.ez_re, xr, &pd.ez_im, xi, -1.0);
-            if data {
-                out.y[x] = dot2(&pd.zg_re, xr, &pd.zg_im, xi, -1.0);
-            }
             let (wr, wi) = (&pre[x * q..(x + 1) * q], &pim[x * q..(x + 1) * q]);
-            for y in x..nc {
-                out.g[x][y] = dot2(
-                    wr,
-                    &cre[y * q..(y + 1) * q],
-                    wi,
-                    &cim[y * q..(y + 1) * q],
-                    1.0,
-                );
-            }
+            let row = row_dots(nc - x, wr, wi, 1.0, cre, cim, q, x);
+            out.g[x][x..nc].copy_from_slice(&row[..nc - x]);
         }
         // The model column m = Σ B_j a_j, by linearity.
         let m = nx - 1;
