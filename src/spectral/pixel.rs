@@ -214,7 +214,9 @@ pub fn fit_samples<S: Samples + ?Sized>(
     data: &S,
     excluded: usize,
 ) -> PixelFits {
-    fit_samples_seeded(ctx, data, excluded, None).0
+    let mut out = PixelFits::none();
+    fit_samples_seeded(ctx, data, excluded, None, &mut out);
+    out
 }
 
 /// What a pixel whose two reflections were found hands the next pixel of
@@ -278,24 +280,23 @@ const ONE_STEP_CHI2: f64 = 0.1;
 /// of a second reflection ([`WARM_AMPLITUDE_SIGMAS`]; the one-reflection
 /// model is then not fitted, and the scene's BIC is summed over the searched
 /// pixels) and the noise level the neighbour's ([`WARM_NOISE_RATIO`]);
-/// otherwise the pixel is searched from scratch. Returns the fits and,
-/// where both points were found, the seed for the next pixel.
+/// otherwise the pixel is searched from scratch. Writes the fits to `out`
+/// (in place: they are ~1 kB) and returns, where both points were found,
+/// the seed for the next pixel.
 pub fn fit_samples_seeded<S: Samples + ?Sized>(
     ctx: &PixelContext,
     data: &S,
     excluded: usize,
     seed: Option<&Seed>,
-) -> (PixelFits, Option<Seed>) {
-    let mut out = PixelFits {
-        per_model: [None; MAX_REFLECTIONS],
-        base: PixelResult::empty(),
-    };
+    out: &mut PixelFits,
+) -> Option<Seed> {
+    *out = PixelFits::none();
     if excluded > 0 {
         out.base.flags |= flags::SATURATED;
     }
     if data.count() < 4 * (3 * MAX_REFLECTIONS + 2) {
         out.base.flags |= flags::NO_DATA;
-        return (out, None);
+        return None;
     }
     let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
     let warm = seed.and_then(|s| warm_fits(ctx, data, s));
@@ -304,7 +305,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
         Some(two) => (None, Some(two), None),
         None => match searched_fits(ctx, data, d12, &mut out.base) {
             Some((one, two, three)) => (Some(one), two, three),
-            None => return (out, None),
+            None => return None,
         },
     };
     // The pixel's signal as one reflection: the one-reflection fit, or on a
@@ -369,7 +370,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
     }
     let unit_sd = carried.or_else(|| unit_sd.get().map(|&v| (v, merged.amp[0], 0)));
     // Seed the next pixel only from a pair found and reported, front first.
-    let next = out.per_model[1].and_then(|two| {
+    out.per_model[1].and_then(|two| {
         let r = two.result;
         (r.model == 2 && r.s[1][0].is_finite()).then_some(())?;
         let mut s = next?;
@@ -382,8 +383,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             s.two.amp.swap(0, 1);
         }
         Some(s)
-    });
-    (out, next)
+    })
 }
 
 /// The two-reflection fit started from the neighbour's, or `None` where the

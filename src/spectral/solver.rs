@@ -528,9 +528,7 @@ impl FitBatch<'_> {
     fn fit_run_into(&self, run: std::ops::Range<usize>, out: &mut [PixelFits]) {
         let mut seed = None;
         for (q, o) in run.zip(out) {
-            let (fits, next) = self.fit_seeded(q, seed.as_ref().filter(|_| self.warm_starts));
-            *o = fits;
-            seed = next;
+            seed = self.fit_seeded(q, seed.as_ref().filter(|_| self.warm_starts), o);
         }
     }
     /// Frames per series.
@@ -541,10 +539,12 @@ impl FitBatch<'_> {
     /// Candidate `q` fitted on this thread (the reference every backend must
     /// reproduce).
     pub fn fit_one(&self, q: usize) -> PixelFits {
-        self.fit_seeded(q, None).0
+        let mut out = PixelFits::none();
+        self.fit_seeded(q, None, &mut out);
+        out
     }
 
-    fn fit_seeded(&self, q: usize, seed: Option<&Seed>) -> (PixelFits, Option<Seed>) {
+    fn fit_seeded(&self, q: usize, seed: Option<&Seed>, out: &mut PixelFits) -> Option<Seed> {
         let ctx = PixelContext {
             design: self.design,
             plans: self.plans,
@@ -556,14 +556,11 @@ impl FitBatch<'_> {
         };
         if let Some(stats) = self.stats {
             return match stats.samples(self.design, q, self.saturation) {
-                Some((data, excluded)) => fit_samples_seeded(&ctx, &data, excluded, seed),
+                Some((data, excluded)) => fit_samples_seeded(&ctx, &data, excluded, seed, out),
                 None => {
-                    let mut out = PixelFits {
-                        per_model: [None; super::model::MAX_REFLECTIONS],
-                        base: PixelResult::empty(),
-                    };
+                    *out = PixelFits::none();
                     out.base.flags = flags::SATURATED | flags::NO_DATA;
-                    (out, None)
+                    None
                 }
             };
         }
@@ -582,7 +579,7 @@ impl FitBatch<'_> {
             })
             .collect();
         let data = SeriesSamples::new(ctx.design, ctx.plans, &y, ctx.kappa0);
-        fit_samples_seeded(&ctx, &data, excluded, seed)
+        fit_samples_seeded(&ctx, &data, excluded, seed, out)
     }
 }
 
