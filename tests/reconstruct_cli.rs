@@ -154,6 +154,7 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let acq = simulate(dir.path());
     let mut coords = Vec::new();
+    let mut stds = Vec::new();
     for engine in ["series", "statistics"] {
         let res = dir.path().join(engine);
         let out = mfd(&[
@@ -171,18 +172,24 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
             String::from_utf8_lossy(&out.stderr)
         );
         let (_, c) = mfd::npy::read_f64(&res.join("screen_coords.npy")).unwrap();
+        let (_, sd) = mfd::npy::read_f64(&res.join("screen_std.npy")).unwrap();
         coords.push(c);
+        stds.push(sd);
     }
-    // Same least squares: the points agree far below their σ (~0.05 px at
-    // 2 % noise here); NaN in the same places.
+    // Same least squares, same path: each engine's fit stops within ~0.03σ
+    // of the same minimum (LM's χ² tolerance 1e-3, or the warm pair's
+    // unevaluated step, which lands to second order), and a stopping test
+    // at its threshold may go either way at the engines' 1e-10 difference:
+    // the points lie within 0.06σ of each other; NaN in the same places.
     let mut worst = 0.0f64;
-    for (a, b) in coords[0].iter().zip(&coords[1]) {
+    for ((a, b), sd) in coords[0].iter().zip(&coords[1]).zip(&stds[0]) {
         assert_eq!(a.is_nan(), b.is_nan());
         if a.is_finite() {
-            worst = worst.max((a - b).abs());
+            worst = worst.max((a - b).abs() / sd);
         }
     }
-    assert!(worst < 1e-3, "{worst} px");
+    eprintln!("series vs statistics: worst {worst:.3} σ");
+    assert!(worst < 0.06, "{worst} σ");
     for (args, needle) in [
         (
             vec!["--engine", "fast"],
