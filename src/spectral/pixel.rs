@@ -189,6 +189,11 @@ pub struct PixelFits {
     pub per_model: [Option<Scored>; MAX_REFLECTIONS],
     /// Result when no model applies (no data, no signal), else the common flags.
     pub base: PixelResult,
+    /// On a warm pixel (one-reflection model not fitted), that model's BIC
+    /// as the weaker amplitude's Wald statistic z puts it, `BIC₂ + z² −
+    /// 3 ln N` (z² approximates the likelihood ratio of dropping that
+    /// reflection): the pixel's share of the scene's BIC sums.
+    pub one_bic: Option<f64>,
 }
 
 impl PixelFits {
@@ -197,6 +202,7 @@ impl PixelFits {
         PixelFits {
             per_model: [None; MAX_REFLECTIONS],
             base: PixelResult::empty(),
+            one_bic: None,
         }
     }
 }
@@ -302,7 +308,11 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
     let warm = seed.and_then(|s| warm_fits(ctx, data, s));
     let reuse = seed.filter(|_| warm.is_some()).and_then(|s| s.unit_sd);
     let (one, two, three) = match warm {
-        Some(two) => (None, Some(two), None),
+        Some((two, z2)) => {
+            let n = data.count() as f64;
+            out.one_bic = Some(two.bic + z2 - 3.0 * n.ln());
+            (None, Some(two), None)
+        }
         None => match searched_fits(ctx, data, d12, &mut out.base) {
             Some((one, two, three)) => (Some(one), two, three),
             None => return None,
@@ -388,7 +398,11 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
 
 /// The two-reflection fit started from the neighbour's, or `None` where the
 /// pixel must be searched (see [`fit_samples_seeded`]).
-fn warm_fits<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, seed: &Seed) -> Option<Candidate> {
+fn warm_fits<S: Samples + ?Sized>(
+    ctx: &PixelContext,
+    data: &S,
+    seed: &Seed,
+) -> Option<(Candidate, f64)> {
     if ctx.allow_third && ctx.prior.third.is_ok() {
         return None;
     }
@@ -432,9 +446,11 @@ fn warm_fits<S: Samples + ?Sized>(ctx: &PixelContext, data: &S, seed: &Seed) -> 
         return None;
     }
     let inv = two.inv.as_ref()?;
-    let detected = (0..2)
-        .all(|k| p.amp[k] > WARM_AMPLITUDE_SIGMAS * (inv[(1 + k, 1 + k)] * sigma2).max(0.0).sqrt());
-    detected.then_some(two)
+    // The weaker amplitude's Wald statistic z = B / σ_B.
+    let z = (0..2)
+        .map(|k| p.amp[k] / (inv[(1 + k, 1 + k)] * sigma2).max(0.0).sqrt())
+        .fold(f64::INFINITY, f64::min);
+    (z > WARM_AMPLITUDE_SIGMAS).then_some((two, z * z))
 }
 
 /// The fits from the spectrum and the station geometry: the one-reflection
@@ -503,9 +519,10 @@ fn searched_fits<S: Samples + ?Sized>(
 
 /// The pixel's result under the candidate's model: labels from physics,
 /// checks, uncertainties.
-/// `merged` is the one-reflection fit: its amplitude and falloff describe
-/// the pixel's signal robustly, so they judge whether a pair is separable;
-/// `unit_sd` caches that judgement's σ at unit noise.
+/// `merged` is the one-reflection fit (on a warm pixel, the pair's
+/// amplitude-weighted centre and total amplitude): its amplitude and
+/// falloff describe the pixel's signal robustly, so they judge whether a
+/// pair is separable; `unit_sd` caches that judgement's σ at unit noise.
 fn finalize<S: Samples + ?Sized>(
     ctx: &PixelContext,
     cand: &Candidate,

@@ -636,6 +636,11 @@ fn scene_model(results: &[PixelFits], allow_third: bool) -> (usize, [f64; 3]) {
                     for (k, c) in f.per_model[..top].iter().enumerate() {
                         sums[k] += c.map_or(0.0, |c| c.bic);
                     }
+                } else if let (2, Some(one), Some(two)) = (top, f.one_bic, f.per_model[1]) {
+                    // A warm pixel: the one-reflection BIC from its pair's
+                    // weaker amplitude.
+                    sums[0] += one;
+                    sums[1] += two.bic;
                 }
             }
             sums
