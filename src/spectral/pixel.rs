@@ -284,8 +284,9 @@ const ONE_STEP_CHI2: f64 = 0.1;
 /// The warm fit is kept only where the search would have ended in the same
 /// place: both amplitudes far above detection and above what the BIC asks
 /// of a second reflection ([`WARM_AMPLITUDE_SIGMAS`]; the one-reflection
-/// model is then not fitted, and the scene's BIC is summed over the searched
-/// pixels) and the noise level the neighbour's ([`WARM_NOISE_RATIO`]);
+/// model is then not fitted, its BIC for the scene's sums taken from the
+/// Wald statistic: [`PixelFits::one_bic`]) and the noise level the
+/// neighbour's ([`WARM_NOISE_RATIO`]);
 /// otherwise the pixel is searched from scratch. Writes the fits to `out`
 /// (in place: they are ~1 kB) and returns, where both points were found,
 /// the seed for the next pixel.
