@@ -509,6 +509,43 @@ fn flat(st: &Station) -> mfd::zernike::ZernikeSurface {
     .unwrap()
 }
 
+/// Two solves of the same frames compared pixel by pixel: the points, in
+/// units of the first one's σ (worst), how many were compared, pixels whose
+/// flags differ (after `mask` on the second's), and the worst relative
+/// difference of the reported σ.
+struct Agreement {
+    worst: f64,
+    compared: usize,
+    differ: usize,
+    worst_sd: f64,
+}
+
+fn agreement(a: &SpectralMaps, b: &SpectralMaps, mask: impl Fn(u16) -> u16) -> Agreement {
+    let mut out = Agreement {
+        worst: 0.0,
+        compared: 0,
+        differ: 0,
+        worst_sd: 0.0,
+    };
+    for (p, q) in a.pixels.iter().zip(&b.pixels) {
+        if p.flags != mask(q.flags) {
+            out.differ += 1;
+            continue;
+        }
+        for k in 0..2 {
+            if p.s[k][0].is_finite() {
+                let sd = p.std[k][0].hypot(p.std[k][1]);
+                let d = (p.s[k][0] - q.s[k][0]).hypot(p.s[k][1] - q.s[k][1]);
+                out.worst = out.worst.max(d / sd);
+                let sd_b = q.std[k][0].hypot(q.std[k][1]);
+                out.worst_sd = out.worst_sd.max((sd_b / sd - 1.0).abs());
+                out.compared += 1;
+            }
+        }
+    }
+    out
+}
+
 #[test]
 fn the_statistics_give_the_series_answers() {
     // The statistics reproduce the series' least squares to the node
@@ -533,28 +570,20 @@ fn the_statistics_give_the_series_answers() {
         &paper_schedule(),
         Engine::Statistics,
     );
-    let (mut worst, mut compared, mut differ) = (0.0f64, 0, 0);
-    for (p, q) in a.maps.pixels.iter().zip(&b.maps.pixels) {
-        // Where no signal is found the statistics add "maybe outside the
-        // band" (512) by design; every other flag must agree.
-        let qf = if q.flags & flags::NO_SIGNAL != 0 {
-            q.flags & !flags::OUT_OF_BAND
+    // Where no signal is found the statistics add "maybe outside the band"
+    // (512) by design; every other flag must agree.
+    let Agreement {
+        worst,
+        compared,
+        differ,
+        ..
+    } = agreement(&a.maps, &b.maps, |f| {
+        if f & flags::NO_SIGNAL != 0 {
+            f & !flags::OUT_OF_BAND
         } else {
-            q.flags
-        };
-        if p.flags != qf {
-            differ += 1;
-            continue;
+            f
         }
-        for k in 0..2 {
-            if p.s[k][0].is_finite() {
-                let sd = p.std[k][0].hypot(p.std[k][1]);
-                let d = (p.s[k][0] - q.s[k][0]).hypot(p.s[k][1] - q.s[k][1]);
-                worst = worst.max(d / sd);
-                compared += 1;
-            }
-        }
-    }
+    });
     eprintln!(
         "statistics vs series: {compared} points, worst difference {worst:.2e} σ; {differ} pixels with other flags"
     );
@@ -655,24 +684,12 @@ fn warm_starts_give_the_searched_answers() {
         };
         let a = run_with(&station(t), params.clone(), &paper_schedule(), cold);
         let b = run(&station(t), params.clone(), &paper_schedule(), engine);
-        let (mut worst, mut compared, mut differ) = (0.0f64, 0, 0);
-        let mut worst_sd = 0.0f64;
-        for (p, q) in a.maps.pixels.iter().zip(&b.maps.pixels) {
-            if p.flags != q.flags {
-                differ += 1;
-                continue;
-            }
-            for k in 0..2 {
-                if p.s[k][0].is_finite() {
-                    let sd = p.std[k][0].hypot(p.std[k][1]);
-                    let d = (p.s[k][0] - q.s[k][0]).hypot(p.s[k][1] - q.s[k][1]);
-                    worst = worst.max(d / sd);
-                    let sd_warm = q.std[k][0].hypot(q.std[k][1]);
-                    worst_sd = worst_sd.max((sd_warm / sd - 1.0).abs());
-                    compared += 1;
-                }
-            }
-        }
+        let Agreement {
+            worst,
+            compared,
+            differ,
+            worst_sd,
+        } = agreement(&a.maps, &b.maps, |f| f);
         eprintln!(
             "{engine:?}, {t} mm, warm vs searched: {compared} points, worst difference {worst:.2e} σ, σ within {:.2} %; {differ} pixels with other flags; scene models {} {}",
             100.0 * worst_sd,
