@@ -94,20 +94,8 @@ pub struct MeasureArgs {
     /// Record only; skip the reconstruction.
     #[arg(long)]
     no_reconstruct: bool,
-    /// How the streaming solver keeps the pixels' data: auto, series or
-    /// statistics (fixed memory per pixel, a few seconds after the last
-    /// frame on the paper's station; see `mfd reconstruct --help`).
-    #[arg(long, default_value = "auto")]
-    engine: String,
-    /// Statistics engine: Fourier bins beyond the predicted points kept.
-    #[arg(long, default_value_t = 3.0)]
-    band_bins: f64,
-    /// Search every pixel's fits from its spectrum, instead of starting
-    /// each from its row neighbour's where that one found both points (the
-    /// same answers within 0.03σ, 3–4× slower; for scenes with many
-    /// discontinuities).
-    #[arg(long)]
-    search_every_pixel: bool,
+    #[command(flatten)]
+    spectral: super::SpectralArgs,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
 }
@@ -217,12 +205,7 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
     };
     let mut solver = (!args.no_reconstruct)
         .then(|| {
-            let config = SpectralConfig {
-                engine: super::parse_engine(&args.engine)?,
-                band_bins: args.band_bins,
-                warm_starts: !args.search_every_pixel,
-                ..SpectralConfig::default()
-            };
+            let config = args.spectral.config()?;
             start_solver(&station, &patterns, &dir, recorder.recorded(), config)
         })
         .transpose()?;

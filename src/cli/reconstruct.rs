@@ -67,23 +67,8 @@ pub struct ReconstructArgs {
     /// Only this region of camera pixels: x0,y0,x1,y1 (columns x0..x1, rows y0..y1).
     #[arg(long, value_delimiter = ',')]
     roi: Option<Vec<u32>>,
-    /// How the spectral stage keeps the pixels' data until the fit: series
-    /// (every sample, 2 bytes per pixel and frame; points anywhere on the
-    /// screen), statistics (~1.5 kB per pixel whatever the frame count,
-    /// points within --band-bins of the station's prediction), or auto
-    /// (statistics when the series would exceed 2 GiB).
-    #[arg(long, default_value = "auto")]
-    engine: String,
-    /// Statistics engine: how many Fourier bins beyond the predicted screen
-    /// points (per direction) the kept band reaches.
-    #[arg(long, default_value_t = 3.0)]
-    band_bins: f64,
-    /// Search every pixel's fits from its spectrum, instead of starting
-    /// each from its row neighbour's where that one found both points (the
-    /// same answers within 0.03σ, 3–4× slower; for scenes with many
-    /// discontinuities).
-    #[arg(long)]
-    search_every_pixel: bool,
+    #[command(flatten)]
+    spectral: super::SpectralArgs,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
 }
@@ -113,10 +98,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         margin_px: args.margin_px,
         edge_margin_mm: args.edge_margin_mm,
         roi: args.roi.as_ref().map(|r| [r[0], r[1], r[2], r[3]]),
-        engine: super::parse_engine(&args.engine)?,
-        band_bins: args.band_bins,
-        warm_starts: !args.search_every_pixel,
-        ..SpectralConfig::default()
+        ..args.spectral.config()?
     };
     let t0 = Instant::now();
     let mut solver = SpectralSolver::new(&station, acq.frames(), config)?;
