@@ -653,19 +653,27 @@ impl CompactStats {
                 let o = self.offsets[d];
                 let g = self.grid[p * nd + d] as usize;
                 let gram = g * qg..(g + 1) * qg;
+                let (mut z, mut zg_re, mut zg_im) = spare();
+                z.clear();
+                z.extend(
+                    st[o..o + 2 * q]
+                        .chunks_exact(2)
+                        .map(|c| C64::new(c[0], c[1])),
+                );
+                for v in [&mut zg_re, &mut zg_im] {
+                    v.clear();
+                    v.resize(qg, 0.0);
+                }
                 PixelDir {
                     mu_c: (t.g0 + g as i64) as f64 * t.step,
-                    z: st[o..o + 2 * q]
-                        .chunks_exact(2)
-                        .map(|c| C64::new(c[0], c[1]))
-                        .collect(),
+                    z,
                     hm: Cow::Borrowed(&t.hm),
                     hd_re: Cow::Borrowed(&t.hd_re[gram.clone()]),
                     hd_im: Cow::Borrowed(&t.hd_im[gram.clone()]),
                     ez_re: Cow::Borrowed(&t.ez_re[gram.clone()]),
                     ez_im: Cow::Borrowed(&t.ez_im[gram]),
-                    zg_re: vec![0.0; qg],
-                    zg_im: vec![0.0; qg],
+                    zg_re,
+                    zg_im,
                     ez_data: Cow::Borrowed(&t.ez_data[g * q..(g + 1) * q]),
                     sy: st[o + 2 * q],
                     syy: st[o + 2 * q + 1],
@@ -735,14 +743,41 @@ impl CompactStats {
 /// `Z' = Lᵀ Z`, row by row: Z lifted from the data nodes onto the product
 /// nodes (real and imaginary parts apart).
 fn lift(z: &[C64], l: &[f64], re: &mut [f64], im: &mut [f64]) {
+    /// Columns `c0..c0 + W` over every row, their sums in registers (one
+    /// load per two multiply-adds, not five); each sum is taken over the
+    /// rows in order, as row by row.
+    #[inline(always)]
+    fn columns<const W: usize>(z: &[C64], l: &[f64], c0: usize, re: &mut [f64], im: &mut [f64]) {
+        let qg = re.len();
+        let mut ar = [0.0f64; W];
+        let mut ai = [0.0f64; W];
+        for (z, row) in z.iter().zip(l.chunks_exact(qg)) {
+            let lw: &[f64; W] = row[c0..c0 + W].try_into().expect("W columns");
+            for t in 0..W {
+                ar[t] += z.re * lw[t];
+                ai[t] += z.im * lw[t];
+            }
+        }
+        for t in 0..W {
+            re[c0 + t] += ar[t];
+            im[c0 + t] += ai[t];
+        }
+    }
     #[inline(always)]
     fn body(z: &[C64], l: &[f64], re: &mut [f64], im: &mut [f64]) {
         let qg = re.len();
-        for (z, row) in z.iter().zip(l.chunks_exact(qg)) {
-            for ((r, i), &l) in re.iter_mut().zip(im.iter_mut()).zip(row) {
-                *r += z.re * l;
-                *i += z.im * l;
-            }
+        let mut c0 = 0;
+        while c0 + 16 <= qg {
+            columns::<16>(z, l, c0, re, im);
+            c0 += 16;
+        }
+        while c0 + 4 <= qg {
+            columns::<4>(z, l, c0, re, im);
+            c0 += 4;
+        }
+        while c0 < qg {
+            columns::<1>(z, l, c0, re, im);
+            c0 += 1;
         }
     }
     #[cfg(target_arch = "x86_64")]
@@ -791,6 +826,38 @@ pub struct CompactSamples<'a> {
     n: f64,
     sy: f64,
     syy: f64,
+}
+
+/// The arrays of one [`PixelDir`] a pixel owns: `z`, `zg_re`, `zg_im`.
+type DirArrays = (Vec<C64>, Vec<f64>, Vec<f64>);
+
+thread_local! {
+    /// Per-thread spare [`DirArrays`]: a pixel's go back here when its
+    /// samples are dropped, so the next pixel's allocate nothing.
+    static SPARE: std::cell::RefCell<Vec<DirArrays>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Spare arrays for a [`PixelDir`] (contents unspecified), or new ones.
+fn spare() -> DirArrays {
+    SPARE
+        .try_with(|s| s.borrow_mut().pop())
+        .ok()
+        .flatten()
+        .unwrap_or_default()
+}
+
+impl Drop for CompactSamples<'_> {
+    fn drop(&mut self) {
+        let _ = SPARE.try_with(|s| {
+            let mut s = s.borrow_mut();
+            for d in self.dirs.drain(..) {
+                // A few pixels' worth (samples may nest): the rest are freed.
+                if s.len() < 16 {
+                    s.push((d.z, d.zg_re, d.zg_im));
+                }
+            }
+        });
+    }
 }
 
 thread_local! {
