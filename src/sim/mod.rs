@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub use camera::{SimCamera, SimParams};
-pub use fastcos::{cos_cycles, exp_fast, sincos_cycles};
+pub use fastcos::{cos_cycles, exp_fast, exp_fast_with, madd, sincos_cycles, sincos_cycles_with};
 pub use scene::RandomSurfaceSpec;
 
 use crate::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};

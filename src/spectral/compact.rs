@@ -36,7 +36,7 @@ use rustfft::num_complex::Complex;
 
 use super::init::refine_peak;
 use super::model::{Design, Normal, Params, Samples, MAX_REFLECTIONS};
-use crate::sim::{exp_fast, sincos_cycles};
+use crate::sim::{exp_fast, exp_fast_with, madd, sincos_cycles, sincos_cycles_with};
 
 type C64 = Complex<f64>;
 
@@ -744,8 +744,8 @@ impl CompactStats {
 /// nodes (real and imaginary parts apart).
 fn lift(z: &[C64], l: &[f64], re: &mut [f64], im: &mut [f64]) {
     /// Columns `c0..c0 + W` over every row, their sums in registers (one
-    /// load per two multiply-adds, not five); each sum is taken over the
-    /// rows in order, as row by row.
+    /// load per two multiply–adds, not five), each taken over the rows in
+    /// order. Not fused: with `mul_add` the compiler left these scalar.
     #[inline(always)]
     fn columns<const W: usize>(z: &[C64], l: &[f64], c0: usize, re: &mut [f64], im: &mut [f64]) {
         let qg = re.len();
@@ -867,10 +867,11 @@ thread_local! {
 
 /// `Σ_j wr_j c^re_{y,j} + sign · wi_j c^im_{y,j}` for the `n` columns
 /// `y = y0 … y0 + n − 1` of `cre`/`cim` (rows of length `q`), in one pass
-/// over the nodes, four at a time with `n` accumulators in registers.
+/// over the nodes, four at a time with `n` accumulators in registers;
+/// multiply–adds fused where `FMA`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn row_dots(
+fn row_dots<const FMA: bool>(
     n: usize,
     wr: &[f64],
     wi: &[f64],
@@ -881,7 +882,7 @@ fn row_dots(
     y0: usize,
 ) -> [f64; NX] {
     #[inline(always)]
-    fn fixed<const N: usize>(
+    fn fixed<const N: usize, const FMA: bool>(
         wr: &[f64],
         wi: &[f64],
         sign: f64,
@@ -890,18 +891,32 @@ fn row_dots(
         q: usize,
         y0: usize,
     ) -> [f64; NX] {
+        let rows = (y0 + N) * q;
+        assert!(wr.len() >= q && wi.len() >= q && cre.len() >= rows && cim.len() >= rows);
+        // Four values from `v` at `o`.
+        #[inline(always)]
+        fn four(v: &[f64], o: usize) -> [f64; 4] {
+            debug_assert!(o + 4 <= v.len());
+            // SAFETY: every call below has o + 4 ≤ v.len(): the weights
+            // at j + 4 ≤ quads ≤ q ≤ wr.len(), wi.len(), the columns at
+            // (y0 + t) q + j + 4 ≤ (y0 + N) q ≤ cre.len(), cim.len() (both
+            // asserted above). Unchecked: the checks and their index
+            // arithmetic were a quarter of the products' time.
+            unsafe { v.as_ptr().add(o).cast::<[f64; 4]>().read_unaligned() }
+        }
         let mut acc = [[0.0f64; 4]; N];
         let quads = q - q % 4;
         let mut j = 0;
         while j < quads {
-            let a: &[f64; 4] = wr[j..j + 4].try_into().expect("four");
-            let b: &[f64; 4] = wi[j..j + 4].try_into().expect("four");
+            let a = four(wr, j);
+            let b = four(wi, j);
+            let sb = [sign * b[0], sign * b[1], sign * b[2], sign * b[3]];
             for (t, acc) in acc.iter_mut().enumerate() {
                 let o = (y0 + t) * q + j;
-                let c: &[f64; 4] = cre[o..o + 4].try_into().expect("four");
-                let d: &[f64; 4] = cim[o..o + 4].try_into().expect("four");
+                let c = four(cre, o);
+                let d = four(cim, o);
                 for l in 0..4 {
-                    acc[l] += a[l] * c[l] + sign * (b[l] * d[l]);
+                    acc[l] = madd::<FMA>(sb[l], d[l], madd::<FMA>(a[l], c[l], acc[l]));
                 }
             }
             j += 4;
@@ -918,14 +933,14 @@ fn row_dots(
         out
     }
     match n {
-        1 => fixed::<1>(wr, wi, sign, cre, cim, q, y0),
-        2 => fixed::<2>(wr, wi, sign, cre, cim, q, y0),
-        3 => fixed::<3>(wr, wi, sign, cre, cim, q, y0),
-        4 => fixed::<4>(wr, wi, sign, cre, cim, q, y0),
-        5 => fixed::<5>(wr, wi, sign, cre, cim, q, y0),
-        6 => fixed::<6>(wr, wi, sign, cre, cim, q, y0),
-        7 => fixed::<7>(wr, wi, sign, cre, cim, q, y0),
-        _ => fixed::<8>(wr, wi, sign, cre, cim, q, y0),
+        1 => fixed::<1, FMA>(wr, wi, sign, cre, cim, q, y0),
+        2 => fixed::<2, FMA>(wr, wi, sign, cre, cim, q, y0),
+        3 => fixed::<3, FMA>(wr, wi, sign, cre, cim, q, y0),
+        4 => fixed::<4, FMA>(wr, wi, sign, cre, cim, q, y0),
+        5 => fixed::<5, FMA>(wr, wi, sign, cre, cim, q, y0),
+        6 => fixed::<6, FMA>(wr, wi, sign, cre, cim, q, y0),
+        7 => fixed::<7, FMA>(wr, wi, sign, cre, cim, q, y0),
+        _ => fixed::<8, FMA>(wr, wi, sign, cre, cim, q, y0),
     }
 }
 
@@ -973,7 +988,7 @@ impl CompactSamples<'_> {
                 // SAFETY: the CPU has AVX2 and FMA (checked at run time).
                 return unsafe { self.dir_sums_avx2(d, p, derivs, data, &mut s) };
             }
-            self.dir_sums_body(d, p, derivs, data, &mut s)
+            self.dir_sums_body::<false>(d, p, derivs, data, &mut s)
         })
     }
 
@@ -991,7 +1006,7 @@ impl CompactSamples<'_> {
         data: bool,
         scratch: &mut Vec<f64>,
     ) -> DirSums {
-        self.dir_sums_body(d, p, derivs, data, scratch)
+        self.dir_sums_body::<true>(d, p, derivs, data, scratch)
     }
 
     /// The inner products of one direction, node-major passes over arrays
@@ -1001,8 +1016,9 @@ impl CompactSamples<'_> {
     /// dot products. The model column `m = Σ B_k a_k` is last in the sums;
     /// being a combination of the `a_k`, its products are combined from
     /// theirs, not computed (a quarter to a third of the dot products).
+    /// Multiply–adds are fused where `FMA` (the AVX2 and FMA build).
     #[inline(always)]
-    fn dir_sums_body(
+    fn dir_sums_body<const FMA: bool>(
         &self,
         d: usize,
         p: &Params,
@@ -1032,13 +1048,13 @@ impl CompactSamples<'_> {
         let (pre, rest) = rest.split_at_mut(nc * q);
         let pim = &mut rest[..nc * q];
         for (ej, &tj) in e.iter_mut().zip(tau) {
-            *ej = exp_fast(-p.kappa * tj * tj);
+            *ej = exp_fast_with::<FMA>(-p.kappa * tj * tj);
         }
         for j in 0..k {
             let dl = ax.s(p.uv[j][0], p.uv[j][1]) - pd.mu_c;
             let (re, im) = (&mut cre[j * q..(j + 1) * q], &mut cim[j * q..(j + 1) * q]);
             for (((r, i), &ej), &tj) in re.iter_mut().zip(im.iter_mut()).zip(&*e).zip(tau) {
-                let (c, s) = sincos_cycles(dl * tj);
+                let (c, s) = sincos_cycles_with::<FMA>(dl * tj);
                 *r = ej * c;
                 *i = ej * s;
             }
@@ -1051,8 +1067,8 @@ impl CompactSamples<'_> {
                 let b = p.amp[j];
                 let (ar, ai) = (&cre[j * q..(j + 1) * q], &cim[j * q..(j + 1) * q]);
                 for (((mr, mi), &r), &i) in mre.iter_mut().zip(mim.iter_mut()).zip(ar).zip(ai) {
-                    *mr += b * r;
-                    *mi += b * i;
+                    *mr = madd::<FMA>(b, r, *mr);
+                    *mi = madd::<FMA>(b, i, *mi);
                 }
             }
             for j in 0..k {
@@ -1093,8 +1109,8 @@ impl CompactSamples<'_> {
                 .zip(pd.hm.iter())
                 .zip(pd.hd_re.iter().zip(pd.hd_im.iter()));
             for (((((pr, pi), &cr), &ci), &hm), (&hr, &hi)) in it {
-                *pr = hm * cr + hr * cr - hi * ci;
-                *pi = hm * ci - hr * ci - hi * cr;
+                *pr = madd::<FMA>(hm + hr, cr, -hi * ci);
+                *pi = madd::<FMA>(hm - hr, ci, -hi * cr);
             }
         }
         let mut out = DirSums {
@@ -1106,13 +1122,13 @@ impl CompactSamples<'_> {
         // data's against every column, each weighted column against the
         // columns from its own on (the upper triangle) — each row loaded
         // once per pass, not once per product.
-        out.e = row_dots(nc, &pd.ez_re, &pd.ez_im, -1.0, cre, cim, q, 0);
+        out.e = row_dots::<FMA>(nc, &pd.ez_re, &pd.ez_im, -1.0, cre, cim, q, 0);
         if data {
-            out.y = row_dots(nc, &pd.zg_re, &pd.zg_im, -1.0, cre, cim, q, 0);
+            out.y = row_dots::<FMA>(nc, &pd.zg_re, &pd.zg_im, -1.0, cre, cim, q, 0);
         }
         for x in 0..nc {
             let (wr, wi) = (&pre[x * q..(x + 1) * q], &pim[x * q..(x + 1) * q]);
-            let row = row_dots(nc - x, wr, wi, 1.0, cre, cim, q, x);
+            let row = row_dots::<FMA>(nc - x, wr, wi, 1.0, cre, cim, q, x);
             out.g[x][x..nc].copy_from_slice(&row[..nc - x]);
         }
         // The model column m = Σ B_j a_j, by linearity.
@@ -1594,7 +1610,7 @@ mod tests {
         let mut scratch = Vec::new();
         for d in 0..2 {
             let a = c.dir_sums(d, &t, true, true);
-            let b = c.dir_sums_body(d, &t, true, true, &mut scratch);
+            let b = c.dir_sums_body::<false>(d, &t, true, true, &mut scratch);
             let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * x.abs().max(y.abs()).max(1.0);
             for x in 0..NX {
                 assert!(close(a.e[x], b.e[x]) && close(a.y[x], b.y[x]), "{d} {x}");
