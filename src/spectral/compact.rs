@@ -627,6 +627,14 @@ impl CompactStats {
         self.set_aside.sort_unstable_by_key(|s| (s.pixel, s.frame));
     }
 
+    /// Asks the CPU to bring pixel `p`'s statistics into cache (the next
+    /// pixel's, while this one is fitted: they are read once, from memory).
+    pub fn prefetch(&self, p: usize) {
+        if let Some(st) = self.state.get(p * self.stride..(p + 1) * self.stride) {
+            prefetch_lines(st);
+        }
+    }
+
     /// Pixel `p`'s statistics with samples at 0 or at/above `saturation`
     /// excluded, and the number excluded; `None` when more than a quarter
     /// of its samples were clipped (given up at ingest). Needs [`Self::seal`].
@@ -738,6 +746,24 @@ impl CompactStats {
             excluded,
         ))
     }
+}
+
+/// Asks the CPU to bring the cache lines of `v` into cache (a hint: no
+/// effect on results, none at all off x86-64).
+pub fn prefetch_lines<T>(v: &[T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let bytes = std::mem::size_of_val(v);
+        let base = v.as_ptr().cast::<i8>();
+        for off in (0..bytes).step_by(64) {
+            // SAFETY: a prefetch reads nothing architecturally and cannot
+            // fault; the address lies within `v`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(base.add(off)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = v;
 }
 
 /// `Z' = Lᵀ Z`, row by row: Z lifted from the data nodes onto the product
@@ -956,6 +982,16 @@ struct DirSums {
     y: [f64; NX],
 }
 
+impl DirSums {
+    fn zero() -> Self {
+        DirSums {
+            g: [[0.0; NX]; NX],
+            e: [0.0; NX],
+            y: [0.0; NX],
+        }
+    }
+}
+
 impl CompactSamples<'_> {
     /// Whether `p` stays where the statistics hold (band and κ range), on
     /// direction `dir` alone when given.
@@ -980,15 +1016,19 @@ impl CompactSamples<'_> {
             })
     }
 
-    fn dir_sums(&self, d: usize, p: &Params, derivs: bool, data: bool) -> DirSums {
+    /// The sums of direction `d` at `p` into `out` (written in place: they
+    /// are 640 bytes, and returning them cost copies); only the entries the
+    /// model's columns use are written, `y` zeroed without `data`.
+    fn dir_sums(&self, d: usize, p: &Params, derivs: bool, data: bool, out: &mut DirSums) {
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             #[cfg(target_arch = "x86_64")]
             if has_avx2_fma() {
                 // SAFETY: the CPU has AVX2 and FMA (checked at run time).
-                return unsafe { self.dir_sums_avx2(d, p, derivs, data, &mut s) };
+                unsafe { self.dir_sums_avx2(d, p, derivs, data, &mut s, out) };
+                return;
             }
-            self.dir_sums_body::<false>(d, p, derivs, data, &mut s)
+            self.dir_sums_body::<false>(d, p, derivs, data, &mut s, out);
         })
     }
 
@@ -1005,8 +1045,9 @@ impl CompactSamples<'_> {
         derivs: bool,
         data: bool,
         scratch: &mut Vec<f64>,
-    ) -> DirSums {
-        self.dir_sums_body::<true>(d, p, derivs, data, scratch)
+        out: &mut DirSums,
+    ) {
+        self.dir_sums_body::<true>(d, p, derivs, data, scratch, out);
     }
 
     /// The inner products of one direction, node-major passes over arrays
@@ -1025,7 +1066,8 @@ impl CompactSamples<'_> {
         derivs: bool,
         data: bool,
         scratch: &mut Vec<f64>,
-    ) -> DirSums {
+        out: &mut DirSums,
+    ) {
         let pd = &self.dirs[d];
         let t = &self.tables.dirs[d];
         let ax = self.design.axes[d];
@@ -1113,19 +1155,16 @@ impl CompactSamples<'_> {
                 *pi = madd::<FMA>(hm - hr, ci, -hi * cr);
             }
         }
-        let mut out = DirSums {
-            g: [[0.0; NX]; NX],
-            e: [0.0; NX],
-            y: [0.0; NX],
-        };
         // One pass over the nodes per weight row: the constant's and the
         // data's against every column, each weighted column against the
         // columns from its own on (the upper triangle) — each row loaded
         // once per pass, not once per product.
         out.e = row_dots::<FMA>(nc, &pd.ez_re, &pd.ez_im, -1.0, cre, cim, q, 0);
-        if data {
-            out.y = row_dots::<FMA>(nc, &pd.zg_re, &pd.zg_im, -1.0, cre, cim, q, 0);
-        }
+        out.y = if data {
+            row_dots::<FMA>(nc, &pd.zg_re, &pd.zg_im, -1.0, cre, cim, q, 0)
+        } else {
+            [0.0; NX]
+        };
         for x in 0..nc {
             let (wr, wi) = (&pre[x * q..(x + 1) * q], &pim[x * q..(x + 1) * q]);
             let row = row_dots::<FMA>(nc - x, wr, wi, 1.0, cre, cim, q, x);
@@ -1145,7 +1184,6 @@ impl CompactSamples<'_> {
         out.g[m][m] = gmm;
         out.e[m] = (0..k).map(|j| p.amp[j] * out.e[j]).sum();
         out.y[m] = (0..k).map(|j| p.amp[j] * out.y[j]).sum();
-        out
     }
 
     fn normal_with(&self, p: &Params, data: bool) -> Normal {
@@ -1167,8 +1205,9 @@ impl CompactSamples<'_> {
         jtj[(0, 0)] = self.n;
         let mut rss = self.syy - 2.0 * ac * self.sy + ac * ac * self.n;
         jtr[0] = self.sy - ac * self.n;
+        let mut s = DirSums::zero();
         for d in 0..self.dirs.len() {
-            let s = self.dir_sums(d, p, true, data);
+            self.dir_sums(d, p, true, data, &mut s);
             let ax = self.design.axes[d];
             // Parameter → (column, factor).
             let mut map = [(0usize, 0.0f64); 3 * MAX_REFLECTIONS + 2];
@@ -1227,12 +1266,13 @@ impl Samples for CompactSamples<'_> {
         let mut g = DMatrix::<f64>::zeros(n, n);
         let mut h = DVector::<f64>::zeros(n);
         let mut yy = 0.0;
+        let mut s = DirSums::zero();
         for d in 0..self.dirs.len() {
             if dir.is_some_and(|x| x != d) {
                 continue;
             }
             let pd = &self.dirs[d];
-            let s = self.dir_sums(d, p, false, true);
+            self.dir_sums(d, p, false, true, &mut s);
             g[(0, 0)] += pd.n;
             h[0] += pd.sy;
             yy += pd.syy;
@@ -1609,8 +1649,9 @@ mod tests {
         let (c, _) = stats.samples(&design, 0, Some(4095)).unwrap();
         let mut scratch = Vec::new();
         for d in 0..2 {
-            let a = c.dir_sums(d, &t, true, true);
-            let b = c.dir_sums_body::<false>(d, &t, true, true, &mut scratch);
+            let (mut a, mut b) = (DirSums::zero(), DirSums::zero());
+            c.dir_sums(d, &t, true, true, &mut a);
+            c.dir_sums_body::<false>(d, &t, true, true, &mut scratch, &mut b);
             let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * x.abs().max(y.abs()).max(1.0);
             for x in 0..NX {
                 assert!(close(a.e[x], b.e[x]) && close(a.y[x], b.y[x]), "{d} {x}");

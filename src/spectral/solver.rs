@@ -8,7 +8,7 @@ use std::thread::JoinHandle;
 
 use rayon::prelude::*;
 
-use super::compact::{CompactStats, FULL_SCALES, STATS_BLOCK};
+use super::compact::{prefetch_lines, CompactStats, FULL_SCALES, STATS_BLOCK};
 use super::init::SpectrumPlans;
 use super::model::SeriesSamples;
 use super::model::{Axis, Design, FrameMeta};
@@ -593,8 +593,17 @@ impl FitBatch<'_> {
 
     fn fit_run_into(&self, run: std::ops::Range<usize>, out: &mut [PixelFits]) {
         let mut seed = None;
-        for (q, o) in run.zip(out) {
-            seed = self.fit_seeded(q, seed.as_ref().filter(|_| self.warm_starts), o);
+        let end = run.end;
+        for (i, q) in run.enumerate() {
+            // The next pixel's statistics and result slot, read and written
+            // once each from memory, are fetched while this one is fitted.
+            if q + 1 < end {
+                if let Some(stats) = self.stats {
+                    stats.prefetch(q + 1);
+                }
+                prefetch_lines(std::slice::from_ref(&out[i + 1]));
+            }
+            seed = self.fit_seeded(q, seed.as_ref().filter(|_| self.warm_starts), &mut out[i]);
         }
     }
     /// Frames per series.
