@@ -436,10 +436,7 @@ impl SmallCholesky {
         let mut inv = DMatrix::zeros(n, n);
         for i in 0..n {
             for j in i..n {
-                let mut s = 0.0;
-                for k in j..n {
-                    s += w[k][i] * w[k][j];
-                }
+                let s: f64 = w[j..n].iter().map(|row| row[i] * row[j]).sum();
                 inv[(i, j)] = s;
                 inv[(j, i)] = s;
             }
