@@ -474,6 +474,8 @@ fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
         &schedule.patterns(),
         SpectralConfig::default(),
     );
+    // The first solve writes into the arrays prepared while the frames
+    // streamed in; the second backend returns arrays of its own.
     let reference = solver.solve_with(&CpuFits).unwrap();
     let counted = Reversed(std::sync::atomic::AtomicUsize::new(0));
     let other = solver.solve_with(&counted).unwrap();
