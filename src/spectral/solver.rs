@@ -345,6 +345,9 @@ impl SpectralSolver {
             if let Some(stats) = self.stats.as_mut() {
                 stats.seal();
             }
+            // The block buffer (32 frames of the candidates, 80 MB on a
+            // full sensor) is not needed again: freed before the solve.
+            self.block = Vec::new();
         }
         Ok(())
     }
