@@ -332,6 +332,26 @@ pub struct Fit {
     pub converged: bool,
 }
 
+impl Fit {
+    /// The noise variance its residuals estimate, σ̂² = RSS/(N − p), for
+    /// `n` samples.
+    pub fn sigma2(&self, n: usize) -> f64 {
+        self.rss / dof(n, &self.params)
+    }
+}
+
+/// Degrees of freedom N − p (at least 1) of `p` fitted to `n` samples.
+fn dof(n: usize, p: &Params) -> f64 {
+    n.saturating_sub(p.len()).max(1) as f64
+}
+
+/// The decrease of the RSS below which a fit has converged: [`RSS_TOL`] of
+/// it, or [`CHI2_TOL`] in χ² at the residuals' own noise level (`dof`
+/// degrees of freedom); never 0, so that an exact fit stops too.
+fn stop_tolerance(rss: f64, dof: f64) -> f64 {
+    (RSS_TOL * rss).max(CHI2_TOL * rss / dof).max(1e-300)
+}
+
 /// Convergence: a step below 1e-5 screen px in every (u, v) (three decades
 /// under the noise-free accuracy goal of 0.01 px) or a relative RSS change
 /// below 1e-11.
@@ -464,8 +484,8 @@ pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_ite
     let mut lambda = 1e-3;
     let mut converged = false;
     let mut iterations = 0;
-    let dof = (data.count().saturating_sub(p.len())).max(1) as f64;
-    let tol = |rss: f64| (RSS_TOL * rss).max(CHI2_TOL * rss / dof).max(1e-300);
+    let dof = dof(data.count(), &p);
+    let tol = |rss: f64| stop_tolerance(rss, dof);
     while iterations < max_iter {
         let mut a = ne.jtj.clone();
         for d in 0..a.nrows() {
@@ -537,8 +557,7 @@ pub fn gauss_newton_step<S: Samples + ?Sized>(
     }
     let next = SmallCholesky::new(&at.jtj)?.solve(&at.jtr);
     let remaining = at.jtr.dot(&next).max(0.0);
-    let dof = (data.count().saturating_sub(p.len())).max(1) as f64;
-    let converged = remaining <= (RSS_TOL * at.rss).max(CHI2_TOL * at.rss / dof);
+    let converged = remaining <= stop_tolerance(at.rss, dof(data.count(), &p));
     Some((
         Fit {
             params: p,

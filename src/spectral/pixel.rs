@@ -345,7 +345,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             two: two.fit.params,
             front: [f.u, f.v],
             back: [b.u, b.v],
-            sigma2: two.fit.rss / (n - two.fit.params.len()).max(1) as f64,
+            sigma2: two.fit.sigma2(n),
             unit_sd: None,
         })
     });
@@ -363,7 +363,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
         let worst = [one.as_ref(), two.as_ref()]
             .into_iter()
             .flatten()
-            .map(|c| c.fit.rss / (n - c.fit.params.len()).max(1) as f64)
+            .map(|c| c.fit.sigma2(n))
             .fold(0.0, f64::max);
         if age < UNIT_SD_REUSE
             && approx.is_finite()
@@ -415,9 +415,9 @@ fn warm_fits<S: Samples + ?Sized>(
         two.uv[0][c] += [f.u, f.v][c] - seed.front[c];
         two.uv[1][c] += [b.u, b.v][c] - seed.back[c];
     }
-    let n = data.count() as f64;
+    let n = data.count();
     let (fit, next, remaining) = gauss_newton_step(data, two)?;
-    let sigma2 = fit.rss / (n - fit.params.len() as f64).max(1.0);
+    let sigma2 = fit.sigma2(n);
     let two = if fit.converged {
         fit
     } else if remaining <= ONE_STEP_CHI2 * sigma2 {
@@ -437,7 +437,7 @@ fn warm_fits<S: Samples + ?Sized>(
     };
     let two = candidate(data, two);
     let p = two.fit.params;
-    let sigma2 = two.fit.rss / (n - p.len() as f64).max(1.0);
+    let sigma2 = two.fit.sigma2(n);
     if sigma2 > WARM_NOISE_RATIO * seed.sigma2 {
         return None;
     }
@@ -562,7 +562,7 @@ fn finalize<S: Samples + ?Sized>(
     if !fit.converged {
         out.flags |= flags::NOT_CONVERGED;
     }
-    let sigma2 = fit.rss / (n - p.len()).max(1) as f64;
+    let sigma2 = fit.sigma2(n);
     let cov = cand.inv.as_ref().map(|m| m * sigma2);
     if p.k == 1 {
         out.flags |= flags::ONE_REFLECTION;
