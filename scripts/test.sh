@@ -1,16 +1,11 @@
 #!/usr/bin/env bash
 # Runs every check of mfd: formatting, clippy with warnings as errors, and all
-# tests (unit, property, integration against ../shared/fixtures, end to end).
+# tests (unit, property, integration against the independent fixture carried
+# in tests/fixtures, end to end). Needs nothing beside the checkout.
 # Installs what is missing first. Usage: scripts/test.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/install-deps.sh
-
-export MFD_SHARED="${MFD_SHARED:-$(cd .. && pwd)/shared}"
-if [ ! -d "$MFD_SHARED/fixtures" ]; then
-  echo "error: shared fixtures not found at $MFD_SHARED/fixtures (set MFD_SHARED)" >&2
-  exit 1
-fi
 
 # Mesa (the display tests' lavapipe) wants a private runtime directory.
 if [ ! -d "${XDG_RUNTIME_DIR:-}" ]; then

@@ -29,11 +29,11 @@
 //! * **Screen pixels.** `(u, v)` continuous, the centre of screen pixel
 //!   (column c, row r) at `(c + 0.5, r + 0.5)`; the screen spans `[0, W] × [0, H]`.
 //! * **Fringes.** `s(u, v) = (u cos θ + v sin θ − s0) / L` ∈ [0, 1] and
-//!   `g = 0.5 + 0.5 cos(2π τ s + φ)` ([`crate::patterns`]).
+//!   `g = 0.5 + 0.5 cos(2π τ s + φ)` ([`crate::acquire::patterns`]).
 //! * **Zernike.** Noll ordering (j = 1 piston, 2 x-tilt, 3 y-tilt, 4 defocus …),
 //!   RMS normalisation over the unit disk, `θ` from +x towards +y,
 //!   `ρ = r / radius_mm` from `center_mm`; coefficient index k is Noll j = k + 1
-//!   ([`crate::zernike`]). The polynomial is the surface also outside ρ = 1.
+//!   ([`crate::optics::zernike`]). The polynomial is the surface also outside ρ = 1.
 //! * **Reflections.** Index 0 = front (S1), 1 = back (S2, one internal
 //!   reflection), 2 = two internal round trips (S3, paper §5.1b).
 //! * **FFT.** Forward transforms unnormalised (`Σ x_n e^{−2πi kn/N}`), as

@@ -1,27 +1,35 @@
 //! mfd: multi-frequency fringe deflectometry of both faces of transparent
 //! planar optics.
 //!
-//! Data flows one way: [`station`] and [`patterns`] describe the instrument,
-//! [`trace`] is the exact forward model, [`sim`] renders what the camera sees,
-//! [`acquisition`] reads and writes recorded frames, [`surfaces_file`] /
-//! [`npy`] hold the results, and [`plot`] draws report pictures of them.
-//! [`conventions`] states frames, units and orderings.
+//! The data flow one way, and the modules follow it:
+//!
+//! ```text
+//!  optics (station, zernike, trace) ──► acquire (patterns, cameras, display, live, acquisition)
+//!                                            │ frames
+//!                                            ▼
+//!                     solve::spectral (S1, S2 per pixel) ──► solve::surfaces (Zernike front, back)
+//!                                                                   │
+//!                                                                   ▼
+//!                                                          report, formats (files, pictures)
+//! ```
+//!
+//! - [`optics`]: the station's geometry, the surface model and the exact
+//!   forward model.
+//! - [`acquire`]: fringe patterns, cameras, the display, the live sequencer
+//!   and the recorded acquisition folder.
+//! - [`solve`]: the spectral stage and the surface solvers.
+//! - [`report`]: what a result tells its reader (pictures).
+//! - [`formats`]: NPY, PNG/TIFF frames, `surfaces.json`.
+//! - [`sim`]: the whole simulated station (renderer, camera, scenes).
+//! - [`kernels`]: numeric kernels shared by the stages.
+//! - [`conventions`]: frames, units and orderings, stated once.
 #![warn(missing_docs)]
 
-pub mod acquisition;
-pub mod camera;
+pub mod acquire;
 pub mod conventions;
-pub mod display;
-pub mod image_io;
-pub mod live;
-pub mod npy;
+pub mod formats;
+pub mod kernels;
 pub mod optics;
-pub mod patterns;
-pub mod plot;
+pub mod report;
 pub mod sim;
-pub mod spectral;
-pub mod station;
-pub mod surfaces;
-pub mod surfaces_file;
-pub mod trace;
-pub mod zernike;
+pub mod solve;

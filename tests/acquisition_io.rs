@@ -6,8 +6,8 @@ mod common;
 
 use std::path::Path;
 
-use mfd::acquisition::{Acquisition, AcquisitionWriter, FrameInfo, FrameLayout};
-use mfd::npy::StackDtype;
+use mfd::acquire::acquisition::{Acquisition, AcquisitionWriter, FrameInfo, FrameLayout};
+use mfd::formats::npy::StackDtype;
 
 fn infos(n: usize) -> Vec<FrameInfo> {
     (0..n)
@@ -140,7 +140,8 @@ fn a_manifest_that_disagrees_with_the_stack_is_rejected() {
 fn a_frame_of_the_wrong_size_is_named() {
     let dir = tempfile::tempdir().unwrap();
     write(dir.path(), FrameLayout::Png { bit_depth: 16 }, 3, true);
-    mfd::image_io::write_png(&dir.path().join("frames/000001.png"), 4, 4, 16, &[0; 16]).unwrap();
+    mfd::formats::image_io::write_png(&dir.path().join("frames/000001.png"), 4, 4, 16, &[0; 16])
+        .unwrap();
     let mut acq = Acquisition::open(dir.path()).unwrap();
     acq.check_resolution(5, 3).unwrap();
     let mut f = Vec::new();

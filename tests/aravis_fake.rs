@@ -11,19 +11,19 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Mutex;
 use std::time::Duration;
 
-use mfd::acquisition::Acquisition;
-use mfd::camera::aravis_fake::FakeStation;
-use mfd::camera::{
+use mfd::acquire::acquisition::Acquisition;
+use mfd::acquire::camera::aravis_fake::FakeStation;
+use mfd::acquire::camera::{
     Camera, CameraConfig, ScreenState, SimFaults, SimulatedCamera, StreamStatistics, TriggerMode,
 };
-use mfd::live::{
+use mfd::acquire::live::{
     acquire, Counters, FrameSink, MirroredDisplay, Recorder, SequencerConfig, Session, SimDisplay,
 };
-use mfd::patterns::Schedule;
+use mfd::acquire::patterns::Schedule;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
+use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{SimCamera, SimParams};
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView};
-use mfd::zernike::ZernikeSurface;
 
 static LOOPBACK: Mutex<()> = Mutex::new(());
 

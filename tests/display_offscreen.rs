@@ -9,10 +9,10 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use mfd::display::levels::reference_frame;
-use mfd::display::{Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::patterns::{FringeAxis, Pattern};
-use mfd::station::DisplayProfile;
+use mfd::acquire::display::levels::reference_frame;
+use mfd::acquire::display::{Dither, OffscreenDisplay, PatternDisplay, Shading};
+use mfd::acquire::patterns::{FringeAxis, Pattern};
+use mfd::optics::station::DisplayProfile;
 
 fn profile() -> DisplayProfile {
     DisplayProfile::load(&common::repo("hw/display/mtiph-e2m21gm.toml")).unwrap()
@@ -234,7 +234,7 @@ fn cli_writes_the_offscreen_render_as_png() {
         line["render_ms"].as_f64().is_some_and(|ms| ms > 0.0),
         "{line}"
     );
-    let image = mfd::image_io::read_gray(&png).unwrap();
+    let image = mfd::formats::image_io::read_gray(&png).unwrap();
     assert_eq!(
         (image.width, image.height, image.bit_depth),
         (1600, 1200, 8)

@@ -17,10 +17,10 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use mfd::display::levels::reference_frame;
-use mfd::display::{Dither, Shading};
-use mfd::patterns::Pattern;
-use mfd::station::DisplayProfile;
+use mfd::acquire::display::levels::reference_frame;
+use mfd::acquire::display::{Dither, Shading};
+use mfd::acquire::patterns::Pattern;
+use mfd::optics::station::DisplayProfile;
 
 const PROFILE: &str = "hw/display/mtiph-e2m21gm.toml";
 
@@ -318,6 +318,7 @@ fn measure_shows_the_schedule_on_a_monitor() {
     );
     assert!(out.status.success(), "{text}");
     // τ 0.2 … 4 step 0.2 on ±45°: 40 patterns.
-    let acq = mfd::acquisition::Acquisition::open(&out_dir.path().join("acquisition")).unwrap();
+    let acq =
+        mfd::acquire::acquisition::Acquisition::open(&out_dir.path().join("acquisition")).unwrap();
     assert_eq!(acq.complete_frames(), 40, "{text}");
 }

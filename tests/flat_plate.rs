@@ -4,9 +4,9 @@
 
 mod common;
 
-use mfd::station::{Station, SymmetricLayout};
-use mfd::trace::{Plate, ScreenHit, TracedView};
-use mfd::zernike::ZernikeSurface;
+use mfd::optics::station::{Station, SymmetricLayout};
+use mfd::optics::trace::{Plate, ScreenHit, TracedView};
+use mfd::optics::zernike::ZernikeSurface;
 use proptest::prelude::*;
 
 fn flat_plate(station: &Station) -> Plate {
@@ -102,15 +102,15 @@ proptest! {
             screen_height_mm: 825.0,
             tilt_deg: tilt,
             focal_length_mm: 16.0,
-            element: mfd::station::Element {
+            element: mfd::optics::station::Element {
                 refractive_index: index,
                 thickness_mm: thickness,
                 aperture_radius_mm: 25.5,
                 aperture_center_mm: nalgebra::Point2::origin(),
             },
         };
-        let cam = mfd::station::CameraProfile::load(&common::repo("hw/camera/baumer-txg12.toml")).unwrap();
-        let disp = mfd::station::DisplayProfile::load(&common::repo("hw/display/mtiph-e2m21gm.toml")).unwrap();
+        let cam = mfd::optics::station::CameraProfile::load(&common::repo("hw/camera/baumer-txg12.toml")).unwrap();
+        let disp = mfd::optics::station::DisplayProfile::load(&common::repo("hw/display/mtiph-e2m21gm.toml")).unwrap();
         let station = layout.build(&cam, &disp).unwrap();
         let plate = flat_plate(&station);
         let (i, j) = ((648 + di) as u32, (483 + dj) as u32);

@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 
 use common::mfd;
-use mfd::acquisition::Acquisition;
+use mfd::acquire::acquisition::Acquisition;
 
 fn station() -> String {
     common::public_small()

@@ -7,18 +7,18 @@ mod common;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use mfd::acquisition::Acquisition;
-use mfd::camera::{
+use mfd::acquire::acquisition::Acquisition;
+use mfd::acquire::camera::{
     Camera, CameraConfig, CameraError, Frame, ScreenState, SimFaults, SimulatedCamera, TriggerMode,
 };
-use mfd::live::{
+use mfd::acquire::live::{
     acquire, Counters, FrameSink, LiveError, MirroredDisplay, Recorder, Report, SequencerConfig,
     Session, SimDisplay,
 };
-use mfd::patterns::{Pattern, Schedule};
+use mfd::acquire::patterns::{Pattern, Schedule};
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView};
 
 /// The simulated station: the fixture's 48×48 camera and a random plate.
 struct Rig {
@@ -292,7 +292,7 @@ impl FrameSink for Slow {
         "slow"
     }
 
-    fn accept(&mut self, index: usize, frame: &Frame) -> Result<(), mfd::live::SinkError> {
+    fn accept(&mut self, index: usize, frame: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
         std::thread::sleep(Duration::from_millis(8));
         self.seen.push(index);
         self.frames.push(frame.clone());
@@ -361,7 +361,7 @@ fn a_consumer_error_stops_the_run_and_is_reported() {
         fn name(&self) -> &'static str {
             "failing"
         }
-        fn accept(&mut self, index: usize, _: &Frame) -> Result<(), mfd::live::SinkError> {
+        fn accept(&mut self, index: usize, _: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
             if index == 9 {
                 return Err("disk full".into());
             }

@@ -6,9 +6,9 @@ mod common;
 
 use common::mfd;
 
-use mfd::acquisition::FrameInfo;
-use mfd::spectral::{flags, Engine, SpectralConfig, SpectralSolver};
-use mfd::station::Station;
+use mfd::acquire::acquisition::FrameInfo;
+use mfd::optics::station::Station;
+use mfd::solve::spectral::{flags, Engine, SpectralConfig, SpectralSolver};
 
 fn simulate(dir: &std::path::Path) -> std::path::PathBuf {
     let station = common::public_small().join("station.toml");
@@ -171,8 +171,8 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let (_, c) = mfd::npy::read_f64(&res.join("screen_coords.npy")).unwrap();
-        let (_, sd) = mfd::npy::read_f64(&res.join("screen_std.npy")).unwrap();
+        let (_, c) = mfd::formats::npy::read_f64(&res.join("screen_coords.npy")).unwrap();
+        let (_, sd) = mfd::formats::npy::read_f64(&res.join("screen_std.npy")).unwrap();
         coords.push(c);
         stds.push(sd);
     }

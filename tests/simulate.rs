@@ -4,13 +4,13 @@
 
 mod common;
 
-use mfd::acquisition::{Acquisition, FrameLayout};
-use mfd::npy::StackDtype;
-use mfd::patterns::{FringeAxis, Schedule};
+use mfd::acquire::acquisition::{Acquisition, FrameLayout};
+use mfd::acquire::patterns::{FringeAxis, Schedule};
+use mfd::formats::npy::StackDtype;
+use mfd::formats::surfaces_file::{self, SurfacesFile};
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{simulate, RandomSurfaceSpec, SimCamera, SimParams, Simulation};
-use mfd::station::Station;
-use mfd::surfaces_file::{self, SurfacesFile};
-use mfd::trace::{Plate, TracedView};
 use nalgebra::{DMatrix, DVector};
 
 fn fixture_station() -> Station {
@@ -185,7 +185,7 @@ fn agrees_with_the_independent_fixture_frames() {
     let (mut sum2, mut sum, mut n) = (0.0, 0.0, 0usize);
     for f in acq.frames() {
         acq.read_frame(f.index, &mut theirs).unwrap();
-        let pattern = mfd::patterns::Pattern {
+        let pattern = mfd::acquire::patterns::Pattern {
             direction_deg: f.direction_deg,
             tau: f.tau,
             phase_rad: f.phase_rad,

@@ -4,10 +4,10 @@
 
 mod common;
 
-use mfd::acquisition::Acquisition;
-use mfd::npy;
-use mfd::spectral::{Engine, SpectralConfig, SpectralSolver};
-use mfd::station::Station;
+use mfd::acquire::acquisition::Acquisition;
+use mfd::formats::npy;
+use mfd::optics::station::Station;
+use mfd::solve::spectral::{Engine, SpectralConfig, SpectralSolver};
 
 #[test]
 fn fixture_screen_points_within_the_bound_series() {
@@ -87,9 +87,9 @@ fn fixture_screen_points_within_the_bound(engine: Engine) {
 
 #[test]
 fn our_bound_against_the_fixture_bound() {
-    use mfd::spectral::model::{normal_equations, Params};
-    use mfd::surfaces_file::{self, SurfacesFile};
-    use mfd::trace::{Plate, TracedView};
+    use mfd::formats::surfaces_file::{self, SurfacesFile};
+    use mfd::optics::trace::{Plate, TracedView};
+    use mfd::solve::spectral::model::{normal_equations, Params};
     let dir = common::public_small();
     let station = Station::load(&dir.join("station.toml")).unwrap();
     let acq = Acquisition::open(&dir).unwrap();

@@ -4,15 +4,15 @@
 
 mod common;
 
-use mfd::acquisition::FrameInfo;
-use mfd::patterns::Schedule;
+use mfd::acquire::acquisition::FrameInfo;
+use mfd::acquire::patterns::Schedule;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
-use mfd::spectral::model::{normal_equations, Params};
-use mfd::spectral::{
+use mfd::solve::spectral::model::{normal_equations, Params};
+use mfd::solve::spectral::{
     flags, CpuFits, Engine, FitBackend, FitBatch, SpectralConfig, SpectralMaps, SpectralSolver,
 };
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView};
 
 struct Run {
     view: TracedView,
@@ -46,11 +46,11 @@ macro_rules! both_engines {
             mod $check {
                 #[test]
                 fn series() {
-                    super::$check(mfd::spectral::Engine::Series);
+                    super::$check(mfd::solve::spectral::Engine::Series);
                 }
                 #[test]
                 fn statistics() {
-                    super::$check(mfd::spectral::Engine::Statistics);
+                    super::$check(mfd::solve::spectral::Engine::Statistics);
                 }
             }
         )*
@@ -79,7 +79,7 @@ fn run_with(
 fn run_patterns(
     station: &Station,
     params: SimParams,
-    patterns: &[mfd::patterns::Pattern],
+    patterns: &[mfd::acquire::patterns::Pattern],
     config: SpectralConfig,
 ) -> Run {
     let (front, back) = RandomSurfaceSpec::default()
@@ -136,7 +136,7 @@ fn fed_solver(
     station: &Station,
     view: &TracedView,
     params: SimParams,
-    patterns: &[mfd::patterns::Pattern],
+    patterns: &[mfd::acquire::patterns::Pattern],
     config: SpectralConfig,
 ) -> (SpectralSolver, SimCamera) {
     let mut cam = SimCamera::new(view, &station.screen, params).unwrap();
@@ -407,7 +407,7 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts(engine: Engi
             } else {
                 std::f64::consts::FRAC_PI_2
             };
-            patterns.push(mfd::patterns::Pattern {
+            patterns.push(mfd::acquire::patterns::Pattern {
                 direction_deg,
                 tau: 0.2 * k as f64,
                 phase_rad,
@@ -435,7 +435,7 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts(engine: Engi
 struct Reversed(std::sync::atomic::AtomicUsize);
 
 impl FitBackend for Reversed {
-    fn fit(&self, batch: &FitBatch) -> Vec<mfd::spectral::pixel::PixelFits> {
+    fn fit(&self, batch: &FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
         let n = batch.candidates.len();
         self.0.store(n, std::sync::atomic::Ordering::Relaxed);
         let mut runs: Vec<_> = batch
@@ -453,7 +453,7 @@ impl FitBackend for Reversed {
 struct Empty;
 
 impl FitBackend for Empty {
-    fn fit(&self, _: &FitBatch) -> Vec<mfd::spectral::pixel::PixelFits> {
+    fn fit(&self, _: &FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
         Vec::new()
     }
 }
@@ -502,9 +502,9 @@ fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
     assert!(err.contains("fit backend: returned 0 results"), "{err}");
 }
 
-fn flat(st: &Station) -> mfd::zernike::ZernikeSurface {
+fn flat(st: &Station) -> mfd::optics::zernike::ZernikeSurface {
     let e = &st.element;
-    mfd::zernike::ZernikeSurface::flat(
+    mfd::optics::zernike::ZernikeSurface::flat(
         e.aperture_radius_mm,
         [e.aperture_center_mm.x, e.aperture_center_mm.y],
     )

@@ -5,7 +5,7 @@ mod common;
 
 use std::path::Path;
 
-use mfd::station::{CameraProfile, DisplayProfile, Station, SymmetricLayout};
+use mfd::optics::station::{CameraProfile, DisplayProfile, Station, SymmetricLayout};
 use proptest::prelude::*;
 
 fn paper_text() -> String {

@@ -4,11 +4,11 @@
 
 mod common;
 
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::RandomSurfaceSpec;
-use mfd::station::Station;
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions};
-use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
-use mfd::zernike::ZernikeSurface;
+use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions};
 
 /// RMS over the unit disk of the difference, piston and tilt removed: with
 /// RMS-normalised orthonormal Zernike terms, the root sum of squares of the
@@ -36,8 +36,8 @@ fn run(station: &Station, terms: Option<usize>, seed: u64) -> (f64, f64) {
     let plate = Plate::new(station, front.clone(), back.clone(), DEFAULT_EDGE_MARGIN_MM);
     let view = TracedView::trace(station, &plate);
     let coords = view.screen_coords();
-    let obs =
-        Observations::from_maps(station, &coords, mfd::surfaces::Uncertainty::Unknown).unwrap();
+    let obs = Observations::from_maps(station, &coords, mfd::solve::surfaces::Uncertainty::Unknown)
+        .unwrap();
     let opts = SurfaceOptions {
         terms,
         ..SurfaceOptions::default()
@@ -62,7 +62,7 @@ fn run(station: &Station, terms: Option<usize>, seed: u64) -> (f64, f64) {
 
 /// The 48×48 bench station with another plate and tilt.
 fn tilted_station(thickness_mm: f64, index: f64, tilt_deg: f64) -> Station {
-    mfd::station::bench_station(thickness_mm, index, tilt_deg).unwrap()
+    mfd::optics::station::bench_station(thickness_mm, index, tilt_deg).unwrap()
 }
 
 #[test]
@@ -94,8 +94,12 @@ fn undetermined_back_stops_or_shrinks() {
     let (front, back) = spec.draw_pair(e.aperture_radius_mm, [0.0, 0.0], 9).unwrap();
     let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
     let coords = TracedView::trace(&station, &plate).screen_coords();
-    let obs =
-        Observations::from_maps(&station, &coords, mfd::surfaces::Uncertainty::Unknown).unwrap();
+    let obs = Observations::from_maps(
+        &station,
+        &coords,
+        mfd::solve::surfaces::Uncertainty::Unknown,
+    )
+    .unwrap();
     let err = reconstruct(
         &obs,
         &station,
@@ -120,5 +124,5 @@ fn undetermined_back_stops_or_shrinks() {
     )
     .unwrap();
     assert!(sol.back.n_terms() < 231);
-    assert!(sol.condition_number <= mfd::surfaces::lm::MAX_CONDITION_NUMBER);
+    assert!(sol.condition_number <= mfd::solve::surfaces::lm::MAX_CONDITION_NUMBER);
 }

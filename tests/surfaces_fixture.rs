@@ -3,15 +3,15 @@
 
 mod common;
 
-use mfd::acquisition::Acquisition;
-use mfd::npy;
-use mfd::spectral::bound::two_reflection_cov;
-use mfd::spectral::{SpectralConfig, SpectralSolver};
-use mfd::station::Station;
-use mfd::surfaces::report::rms_difference_nm;
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
-use mfd::surfaces_file::{to_surface, SurfacesFile};
-use mfd::trace::{Plate, TracedView};
+use mfd::acquire::acquisition::Acquisition;
+use mfd::formats::npy;
+use mfd::formats::surfaces_file::{to_surface, SurfacesFile};
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
+use mfd::solve::spectral::bound::two_reflection_cov;
+use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
+use mfd::solve::surfaces::report::rms_difference_nm;
+use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 fn crb_json() -> serde_json::Value {
     let text = std::fs::read_to_string(common::public_small().join("truth/crb.json")).unwrap();
@@ -136,8 +136,8 @@ fn fixture_frames_reconstruct_within_twice_the_bound() {
     let t = truth();
     let crb = crb_json();
     let figures = [
-        mfd::surfaces::report::figures(&sol, false),
-        mfd::surfaces::report::figures(&sol, true),
+        mfd::solve::surfaces::report::figures(&sol, false),
+        mfd::solve::surfaces::report::figures(&sol, true),
     ];
     for (k, (name, coeffs, truth)) in [
         (

@@ -5,15 +5,15 @@
 
 mod common;
 
-use mfd::acquisition::FrameInfo;
-use mfd::patterns::Schedule;
+use mfd::acquire::acquisition::FrameInfo;
+use mfd::acquire::patterns::Schedule;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
-use mfd::spectral::bound::truth_cov_map;
-use mfd::spectral::{SpectralConfig, SpectralSolver};
-use mfd::station::Station;
-use mfd::surfaces::report::{figures, rms_difference_nm};
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
-use mfd::trace::{Plate, TracedView};
+use mfd::solve::spectral::bound::truth_cov_map;
+use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
+use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 struct Outcome {
     error: [f64; 2],

@@ -1,13 +1,13 @@
 //! `mfd trace`'s forward model against the independent implementation that
-//! made `shared/fixtures/public-small`: its truth screen coordinates must be
+//! made `tests/fixtures/public-small` (a copy of `shared/fixtures/public-small`): its truth screen coordinates must be
 //! reproduced to 1e-4 screen px, with NaN exactly where the fixture has NaN.
 
 mod common;
 
-use mfd::npy;
-use mfd::station::Station;
-use mfd::surfaces_file::{self, SurfacesFile};
-use mfd::trace::{Plate, TracedView};
+use mfd::formats::npy;
+use mfd::formats::surfaces_file::{self, SurfacesFile};
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
 
 #[test]
 fn reproduces_the_public_fixture_truth() {
@@ -18,7 +18,12 @@ fn reproduces_the_public_fixture_truth() {
     let back = surfaces_file::to_surface(&truth, truth.back_coefficients()).unwrap();
     // The fixture's scene.json gives plate_radius_mm = 28.5 = aperture + 3 mm,
     // the tracer's default rim margin (no fixture-specific setting here).
-    let plate = Plate::new(&station, front, back, mfd::trace::DEFAULT_EDGE_MARGIN_MM);
+    let plate = Plate::new(
+        &station,
+        front,
+        back,
+        mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM,
+    );
     let view = TracedView::trace(&station, &plate);
     let ours = view.screen_coords();
     let (shape, theirs) = npy::read_f64(&dir.join("truth/truth_screen_coords.npy")).unwrap();
@@ -45,4 +50,40 @@ fn reproduces_the_public_fixture_truth() {
     assert!(worst < 1e-4, "worst difference {worst:e} px");
     // The fixture has 1216 front and 1106 back points (counted with numpy).
     assert_eq!(compared, [2 * 1216, 2 * 1106]);
+}
+
+/// The carried copy of the independent fixture is byte for byte what
+/// `tests/fixtures/SHA256SUMS` lists (a copy of `shared/fixtures`; never
+/// edited): a changed, added or missing file fails here.
+#[test]
+fn fixture_is_unedited() {
+    use sha2::{Digest, Sha256};
+    let dir = common::public_small();
+    let list = std::fs::read_to_string(common::repo("tests/fixtures/SHA256SUMS")).unwrap();
+    let mut listed = Vec::new();
+    for line in list.lines() {
+        let (digest, name) = line.split_once("  ").expect("`DIGEST  ./PATH` per line");
+        let bytes = std::fs::read(dir.join(name)).unwrap();
+        let ours: String = Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        assert_eq!(ours, digest, "{name} differs from the fixture it copies");
+        listed.push(name.trim_start_matches("./").to_string());
+    }
+    let mut present = Vec::new();
+    let mut stack = vec![dir.clone()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let p = entry.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                present.push(p.strip_prefix(&dir).unwrap().to_string_lossy().into_owned());
+            }
+        }
+    }
+    listed.sort();
+    present.sort();
+    assert_eq!(listed, present, "files added to or missing from the fixture copy");
 }

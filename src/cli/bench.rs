@@ -5,11 +5,11 @@ use std::time::Instant;
 
 use clap::{Args, Subcommand};
 
-use mfd::patterns::Schedule;
+use mfd::acquire::patterns::Schedule;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
-use mfd::zernike::ZernikeSurface;
 
 /// Arguments of `mfd bench`.
 #[derive(Args)]
@@ -102,8 +102,8 @@ fn peak_rss_bytes() -> Option<u64> {
 }
 
 fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
-    use mfd::acquisition::FrameInfo;
-    use mfd::spectral::{SpectralConfig, SpectralSolver};
+    use mfd::acquire::acquisition::FrameInfo;
+    use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
     let station = Station::load(&args.station)?;
     let (front, back) = random_surfaces(&station)?;
     let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);

@@ -9,12 +9,12 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
+use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::RandomSurfaceSpec;
-use mfd::station::Station;
-use mfd::surfaces::report::{figures, rms_difference_nm};
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
-use mfd::trace::{Plate, TracedView};
-use mfd::zernike::ZernikeSurface;
+use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 /// Arguments of `mfd bench extremes`.
 #[derive(Args)]
@@ -81,7 +81,7 @@ pub fn run(args: &ExtremesArgs) -> anyhow::Result<()> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for c in &CASES {
-        let station = mfd::station::bench_station(c.thickness_mm, c.index, c.tilt_deg)?;
+        let station = mfd::optics::station::bench_station(c.thickness_mm, c.index, c.tilt_deg)?;
         let row = match one(&station, c, args) {
             Ok(r) => r,
             Err(e) => format!("| – | – | – | – | stopped: {} |", crate::error_chain(&e)),
@@ -102,7 +102,7 @@ fn one(station: &Station, c: &Case, args: &ExtremesArgs) -> anyhow::Result<Strin
         ..RandomSurfaceSpec::default()
     };
     let front = ZernikeSurface::new(
-        mfd::zernike::ZernikeBasis::new(c.terms, e.aperture_radius_mm, centre)?,
+        mfd::optics::zernike::ZernikeBasis::new(c.terms, e.aperture_radius_mm, centre)?,
         spec.draw(args.seed),
     )?;
     let back_spec = RandomSurfaceSpec {

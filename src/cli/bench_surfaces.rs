@@ -10,11 +10,11 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::sim::RandomSurfaceSpec;
-use mfd::station::Station;
-use mfd::surfaces::report::{figures, rms_difference_nm};
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
-use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 /// Arguments of `mfd bench surfaces`.
 #[derive(Args)]

@@ -3,13 +3,13 @@
 
 use clap::Args;
 
-use mfd::acquisition::FrameInfo;
-use mfd::patterns::Schedule;
+use mfd::acquire::acquisition::FrameInfo;
+use mfd::acquire::patterns::Schedule;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
-use mfd::spectral::bound::two_reflection_bound;
-use mfd::spectral::{flags, SpectralConfig, SpectralSolver};
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView};
+use mfd::solve::spectral::bound::two_reflection_bound;
+use mfd::solve::spectral::{flags, SpectralConfig, SpectralSolver};
 
 /// Arguments of `mfd bench thickness`.
 #[derive(Args)]
@@ -28,9 +28,13 @@ pub struct TableArgs {
     engine: String,
 }
 
-/// The 48 × 48 bench station ([`mfd::station::bench_station`]) at 15°.
+/// The 48 × 48 bench station ([`mfd::optics::station::bench_station`]) at 15°.
 pub fn small_station(thickness_mm: f64, index: f64) -> anyhow::Result<Station> {
-    Ok(mfd::station::bench_station(thickness_mm, index, 15.0)?)
+    Ok(mfd::optics::station::bench_station(
+        thickness_mm,
+        index,
+        15.0,
+    )?)
 }
 
 /// Runs `mfd bench thickness`: prints a markdown table.
@@ -49,7 +53,7 @@ pub fn run(args: &TableArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn row(t: f64, n: f64, noise: f64, engine: mfd::spectral::Engine) -> anyhow::Result<()> {
+fn row(t: f64, n: f64, noise: f64, engine: mfd::solve::spectral::Engine) -> anyhow::Result<()> {
     let station = small_station(t, n)?;
     let (front, back) = RandomSurfaceSpec::default().draw_pair(25.5, [0.0, 0.0], 31)?;
     let view = TracedView::trace(&station, &Plate::new(&station, front, back, 3.0));

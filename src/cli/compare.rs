@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::Args;
 
-use mfd::npy;
-use mfd::surfaces::report::rms_difference_nm;
-use mfd::surfaces_file::SurfacesFile;
+use mfd::formats::npy;
+use mfd::formats::surfaces_file::SurfacesFile;
+use mfd::solve::surfaces::report::rms_difference_nm;
 
 /// Arguments of `mfd compare`.
 #[derive(Args)]

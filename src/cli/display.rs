@@ -10,10 +10,10 @@ use anyhow::{bail, Context};
 use clap::Args;
 
 #[cfg(feature = "display")]
-use mfd::display::Shown;
-use mfd::display::{Dither, OffscreenDisplay, PatternDisplay};
-use mfd::patterns::Pattern;
-use mfd::station::DisplayProfile;
+use mfd::acquire::display::Shown;
+use mfd::acquire::display::{Dither, OffscreenDisplay, PatternDisplay};
+use mfd::acquire::patterns::Pattern;
+use mfd::optics::station::DisplayProfile;
 
 /// Arguments of `mfd display`.
 #[derive(Args)]
@@ -114,7 +114,7 @@ fn offscreen(
     let readback_ms = t2.elapsed().as_secs_f64() * 1e3;
     let (w, h) = display.resolution();
     let data: Vec<u16> = frame.iter().map(|&v| u16::from(v)).collect();
-    mfd::image_io::write_png(png, w, h, 8, &data)?;
+    mfd::formats::image_io::write_png(png, w, h, 8, &data)?;
     let line = serde_json::json!({
         "event": "offscreen",
         "adapter": display.adapter(),
@@ -160,7 +160,7 @@ fn shown_line(monitor: usize, (w, h): (u32, u32), asked: Instant, shown: &Shown)
 
 #[cfg(feature = "display")]
 fn list() -> anyhow::Result<()> {
-    for monitor in mfd::display::window::list_monitors()? {
+    for monitor in mfd::acquire::display::window::list_monitors()? {
         println!("{monitor}");
     }
     Ok(())
@@ -172,8 +172,8 @@ fn list() -> anyhow::Result<()> {
 }
 
 #[cfg(not(feature = "display"))]
-fn not_built() -> mfd::display::DisplayError {
-    mfd::display::DisplayError::NotBuilt {
+fn not_built() -> mfd::acquire::display::DisplayError {
+    mfd::acquire::display::DisplayError::NotBuilt {
         backend: "window".into(),
         feature: "display",
     }
@@ -192,7 +192,7 @@ fn window(
     pattern: Pattern,
     dither: Dither,
 ) -> anyhow::Result<()> {
-    use mfd::display::window::{run_fullscreen, WindowConfig};
+    use mfd::acquire::display::window::{run_fullscreen, WindowConfig};
 
     let mut config = WindowConfig::from_profile(profile, args.monitor, dither)?;
     if args.any_resolution {

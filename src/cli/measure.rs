@@ -11,21 +11,21 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use mfd::acquisition::{Acquisition, FrameInfo};
-use mfd::camera::{
+use mfd::acquire::acquisition::{Acquisition, FrameInfo};
+use mfd::acquire::camera::{
     self, Camera, CameraConfig, CameraSpec, PixelFormat, ScreenState, SimFaults, SimulatedCamera,
     TriggerMode,
 };
-use mfd::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::live::{
+use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
+use mfd::acquire::live::{
     acquire, Counters, FrameSink, MirroredDisplay, Recorder, Report, SequencerConfig, Session,
     SolverSink,
 };
-use mfd::patterns::Pattern;
+use mfd::acquire::patterns::Pattern;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::sim::{SimCamera, SimParams};
-use mfd::spectral::{SpectralConfig, SpectralSolver};
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
 
 use super::simulate::ScheduleArgs;
 
@@ -139,7 +139,7 @@ pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
 /// The measurement on monitor `--display N` (an index of `mfd display --list`).
 #[cfg(feature = "display")]
 fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
-    use mfd::display::window::{run_fullscreen, WindowConfig, WindowDisplay};
+    use mfd::acquire::display::window::{run_fullscreen, WindowConfig, WindowDisplay};
     let station = Station::load(&args.station)?;
     let monitor: usize = args.display.parse().with_context(|| {
         format!(
@@ -167,8 +167,8 @@ fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
         fn show(
             &mut self,
             index: usize,
-            pattern: &mfd::patterns::Pattern,
-        ) -> Result<mfd::display::Shown, DisplayError> {
+            pattern: &mfd::acquire::patterns::Pattern,
+        ) -> Result<mfd::acquire::display::Shown, DisplayError> {
             self.0.show(index, pattern)
         }
     }
@@ -467,7 +467,9 @@ fn finish(
     match solver {
         Some(solver) => {
             let station = Station::load(&args.station)?;
-            let opts = args.surfaces.options(mfd::trace::DEFAULT_EDGE_MARGIN_MM)?;
+            let opts = args
+                .surfaces
+                .options(mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM)?;
             let surfaces = (!args.surfaces.no_surfaces).then_some(&opts);
             super::reconstruct::solve_and_write(
                 solver,

@@ -18,9 +18,9 @@ pub mod tradeoff;
 use std::path::Path;
 
 use anyhow::Context;
-use mfd::station::Station;
-use mfd::surfaces_file::SurfacesFile;
-use mfd::zernike::ZernikeSurface;
+use mfd::formats::surfaces_file::SurfacesFile;
+use mfd::optics::station::Station;
+use mfd::optics::zernike::ZernikeSurface;
 
 /// Front and back surfaces from a `surfaces.json`, or flat surfaces over the
 /// station's aperture when none is given. A `null` surface is flat.
@@ -36,7 +36,7 @@ pub fn load_surfaces(
     };
     let file = SurfacesFile::load(path)?;
     let make = |coeffs: Option<&Vec<f64>>| -> anyhow::Result<ZernikeSurface> {
-        mfd::surfaces_file::to_surface(&file, coeffs)
+        mfd::formats::surfaces_file::to_surface(&file, coeffs)
             .with_context(|| format!("{}: building the Zernike surface", path.display()))
     };
     Ok((
@@ -73,19 +73,19 @@ impl SpectralArgs {
     ///
     /// # Errors
     /// An unknown `--engine`.
-    pub fn config(&self) -> anyhow::Result<mfd::spectral::SpectralConfig> {
-        Ok(mfd::spectral::SpectralConfig {
+    pub fn config(&self) -> anyhow::Result<mfd::solve::spectral::SpectralConfig> {
+        Ok(mfd::solve::spectral::SpectralConfig {
             engine: parse_engine(&self.engine)?,
             band_bins: self.band_bins,
             warm_starts: !self.search_every_pixel,
-            ..mfd::spectral::SpectralConfig::default()
+            ..mfd::solve::spectral::SpectralConfig::default()
         })
     }
 }
 
 /// The spectral engine named on the command line (`--engine`).
-pub fn parse_engine(name: &str) -> anyhow::Result<mfd::spectral::Engine> {
-    use mfd::spectral::Engine;
+pub fn parse_engine(name: &str) -> anyhow::Result<mfd::solve::spectral::Engine> {
+    use mfd::solve::spectral::Engine;
     match name {
         "auto" => Ok(Engine::Auto),
         "series" => Ok(Engine::Series),

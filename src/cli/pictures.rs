@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use mfd::plot::{coefficient_chart_png, height_map_png};
-use mfd::surfaces::report::{SurfaceFigures, REMOVED_TERMS};
+use mfd::report::plot::{coefficient_chart_png, height_map_png};
+use mfd::solve::surfaces::report::{SurfaceFigures, REMOVED_TERMS};
 
 fn title_case(name: &str) -> String {
     let mut c = name.chars();

@@ -8,11 +8,11 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use mfd::acquisition::Acquisition;
-use mfd::spectral::{flags, SpectralConfig, SpectralMaps, SpectralSolver};
-use mfd::station::Station;
-use mfd::surfaces::Uncertainty;
-use mfd::trace::DEFAULT_EDGE_MARGIN_MM;
+use mfd::acquire::acquisition::Acquisition;
+use mfd::optics::station::Station;
+use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
+use mfd::solve::spectral::{flags, SpectralConfig, SpectralMaps, SpectralSolver};
+use mfd::solve::surfaces::Uncertainty;
 
 /// Arguments of `mfd reconstruct`.
 #[derive(Args)]
@@ -133,7 +133,7 @@ pub fn solve_and_write(
     station: &Station,
     out: &std::path::Path,
     read_s: f64,
-    surfaces: Option<&mfd::surfaces::SurfaceOptions>,
+    surfaces: Option<&mfd::solve::surfaces::SurfaceOptions>,
 ) -> anyhow::Result<()> {
     let t1 = Instant::now();
     let maps = solver.solve()?;
@@ -154,7 +154,7 @@ pub fn solve_and_write(
 /// The surface stage alone, from a screen_coords.npy.
 fn from_screen_coords(
     args: &ReconstructArgs,
-    opts: &mfd::surfaces::SurfaceOptions,
+    opts: &mfd::solve::surfaces::SurfaceOptions,
 ) -> anyhow::Result<()> {
     let (Some(coords_path), Some(station_path)) = (&args.screen_coords, &args.station) else {
         anyhow::bail!("give an acquisition folder, or --screen-coords with --station");
@@ -167,7 +167,7 @@ fn from_screen_coords(
         } else {
             vec![cam.height as usize, cam.width as usize, 4, 4]
         };
-        let (shape, data) = mfd::npy::read_f64(path)?;
+        let (shape, data) = mfd::formats::npy::read_f64(path)?;
         anyhow::ensure!(
             shape == expect,
             "{}: shape {shape:?}, expected {expect:?} (rows, columns, reflection, u/v) for {}",

@@ -5,13 +5,13 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use mfd::acquisition::FrameLayout;
-use mfd::patterns::Schedule;
+use mfd::acquire::acquisition::FrameLayout;
+use mfd::acquire::patterns::Schedule;
+use mfd::formats::surfaces_file::SurfacesFile;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
+use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{simulate, RandomSurfaceSpec, SimParams, Simulation};
-use mfd::station::Station;
-use mfd::surfaces_file::SurfacesFile;
-use mfd::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
-use mfd::zernike::ZernikeSurface;
 
 /// The pattern schedule flags, shared by every command that shows patterns.
 #[derive(Args, Clone)]
@@ -129,10 +129,10 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         (true, 8) => FrameLayout::Png { bit_depth: 8 },
         (true, _) => FrameLayout::Png { bit_depth: 16 },
         (false, 8) => FrameLayout::Stack {
-            dtype: mfd::npy::StackDtype::U8,
+            dtype: mfd::formats::npy::StackDtype::U8,
         },
         (false, _) => FrameLayout::Stack {
-            dtype: mfd::npy::StackDtype::U16,
+            dtype: mfd::formats::npy::StackDtype::U16,
         },
     };
     let patterns = schedule.patterns();

@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use nalgebra::Point2;
 
-use mfd::station::{CameraProfile, DisplayProfile, Element, SymmetricLayout};
+use mfd::optics::station::{CameraProfile, DisplayProfile, Element, SymmetricLayout};
 
 /// Arguments of `mfd station`.
 #[derive(Args)]

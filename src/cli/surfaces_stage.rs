@@ -8,12 +8,14 @@ use anyhow::Context;
 use clap::Args;
 use serde_json::json;
 
-use mfd::npy;
-use mfd::station::Station;
-use mfd::surfaces::lm::LmOptions;
-use mfd::surfaces::report::{figures, height_grid, SurfaceFigures};
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, SurfaceSolution, Uncertainty};
-use mfd::surfaces_file::SurfacesFile;
+use mfd::formats::npy;
+use mfd::formats::surfaces_file::SurfacesFile;
+use mfd::optics::station::Station;
+use mfd::solve::surfaces::lm::LmOptions;
+use mfd::solve::surfaces::report::{figures, height_grid, SurfaceFigures};
+use mfd::solve::surfaces::{
+    reconstruct, Observations, SurfaceOptions, SurfaceSolution, Uncertainty,
+};
 
 /// Side of the height-map grids, pixels.
 const GRID: usize = 256;

@@ -6,9 +6,9 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 
-use mfd::npy;
-use mfd::station::Station;
-use mfd::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::formats::npy;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 
 /// Arguments of `mfd trace`.
 #[derive(Args)]

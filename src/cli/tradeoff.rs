@@ -10,17 +10,17 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 
-use mfd::acquisition::FrameInfo;
-use mfd::patterns::Schedule;
-use mfd::plot::{line_plot_png, Panel, Series};
+use mfd::acquire::acquisition::FrameInfo;
+use mfd::acquire::patterns::Schedule;
+use mfd::optics::station::Station;
+use mfd::optics::trace::{Plate, TracedView};
+use mfd::optics::zernike::ZernikeSurface;
+use mfd::report::plot::{line_plot_png, Panel, Series};
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
-use mfd::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
-use mfd::station::Station;
-use mfd::surfaces::lm::LmOptions;
-use mfd::surfaces::report::{figures, rms_difference_nm};
-use mfd::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
-use mfd::trace::{Plate, TracedView};
-use mfd::zernike::ZernikeSurface;
+use mfd::solve::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
+use mfd::solve::surfaces::lm::LmOptions;
+use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 /// Arguments of `mfd tradeoff`.
 #[derive(Args)]

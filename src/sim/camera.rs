@@ -14,11 +14,11 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use super::fastcos::cos_cycles;
 use super::SimError;
-use crate::patterns::{FringeAxis, Pattern};
-use crate::station::Screen;
-use crate::trace::TracedView;
+use crate::acquire::patterns::{FringeAxis, Pattern};
+use crate::kernels::cos_cycles;
+use crate::optics::station::Screen;
+use crate::optics::trace::TracedView;
 
 /// Simulated camera settings.
 #[derive(Debug, Clone, PartialEq)]

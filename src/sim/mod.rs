@@ -3,22 +3,20 @@
 //! [`simulate`], which writes a whole acquisition folder with its truth.
 
 mod camera;
-mod fastcos;
 mod scene;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub use camera::{SimCamera, SimParams};
-pub use fastcos::{cos_cycles, exp_fast, exp_fast_with, madd, sincos_cycles, sincos_cycles_with};
 pub use scene::RandomSurfaceSpec;
 
-use crate::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};
-use crate::npy::{self, NpyError};
-use crate::patterns::Pattern;
-use crate::station::{Station, StationError};
-use crate::surfaces_file::{SurfacesFile, SurfacesFileError};
-use crate::trace::{Plate, TracedView};
+use crate::acquire::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};
+use crate::acquire::patterns::Pattern;
+use crate::formats::npy::{self, NpyError};
+use crate::formats::surfaces_file::{SurfacesFile, SurfacesFileError};
+use crate::optics::station::{Station, StationError};
+use crate::optics::trace::{Plate, TracedView};
 
 /// What can go wrong simulating.
 #[derive(Debug, thiserror::Error)]

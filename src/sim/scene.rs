@@ -4,7 +4,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use crate::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
+use crate::optics::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
 
 /// How to draw a random surface: tilt terms and a band of higher Noll terms
 /// scaled to a given RMS.

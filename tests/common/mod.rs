@@ -3,22 +3,11 @@
 
 use std::path::PathBuf;
 
-/// The project's `shared/` folder: `$MFD_SHARED`, else `../shared` beside the checkout.
-pub fn shared() -> PathBuf {
-    let dir = std::env::var_os("MFD_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"));
-    assert!(
-        dir.join("fixtures").is_dir(),
-        "shared fixtures not found at {} (set MFD_SHARED)",
-        dir.display()
-    );
-    dir
-}
-
-/// The public fixture folder.
+/// The independent fixture folder, carried in the repository
+/// (`tests/fixtures/public-small`, a copy of `shared/fixtures/public-small`;
+/// never edited, see `tests/fixtures/README.md`).
 pub fn public_small() -> PathBuf {
-    shared().join("fixtures/public-small")
+    repo("tests/fixtures/public-small")
 }
 
 /// A file of the repository.

@@ -1,0 +1,116 @@
+//! The Cramér–Rao bound of the screen points under the joint model.
+
+use super::model::{normal_equations, Design, Params, MAX_REFLECTIONS};
+
+/// Standard deviations `sqrt(σ_u² + σ_v²)` of S1 and S2 that no unbiased
+/// estimator can beat, for two reflections at `uv` with background `offset`
+/// and amplitudes `amp` (counts), falloff κ, and white noise of `sigma`
+/// counts on every frame of `design`: the inverse Fisher information
+/// `σ² (JᵀJ)⁻¹` of all 3K + 2 parameters. `None` if it is singular.
+pub fn two_reflection_bound(
+    design: &Design,
+    uv: [[f64; 2]; 2],
+    offset: f64,
+    amp: [f64; 2],
+    kappa: f64,
+    sigma: f64,
+) -> Option<[f64; 2]> {
+    let c = two_reflection_cov(design, uv, offset, amp, kappa, sigma)?;
+    Some([
+        (c[0][0] + c[1][1]).max(0.0).sqrt(),
+        (c[2][2] + c[3][3]).max(0.0).sqrt(),
+    ])
+}
+
+/// The bound's full covariance of `(u1, v1, u2, v2)`, px²: the two screen
+/// points of one pixel are correlated where their spectra overlap.
+pub fn two_reflection_cov(
+    design: &Design,
+    uv: [[f64; 2]; 2],
+    offset: f64,
+    amp: [f64; 2],
+    kappa: f64,
+    sigma: f64,
+) -> Option<[[f64; 4]; 4]> {
+    let rows = reflections_cov(design, &uv, offset, &amp, kappa, sigma)?;
+    Some(std::array::from_fn(|a| rows[a]))
+}
+
+/// The bound's covariance of the reflections present, `(u, v)` per
+/// reflection in `uv` order (1 or 2 reflections).
+fn reflections_cov(
+    design: &Design,
+    uv: &[[f64; 2]],
+    offset: f64,
+    amp: &[f64],
+    kappa: f64,
+    sigma: f64,
+) -> Option<Vec<[f64; 2 * 2]>> {
+    let k = uv.len();
+    let mut p = Params {
+        k,
+        offset,
+        amp: [0.0; MAX_REFLECTIONS],
+        uv: [[0.0; 2]; MAX_REFLECTIONS],
+        kappa,
+    };
+    p.amp[..k].copy_from_slice(amp);
+    p.uv[..k].copy_from_slice(uv);
+    let index: Vec<u32> = (0..design.frames.len() as u32).collect();
+    let zeros = vec![0.0; index.len()];
+    let cov = normal_equations(design, &index, &zeros, &p)
+        .jtj
+        .try_inverse()?
+        * (sigma * sigma);
+    // Flattened 2k × 2k block of the screen coordinates, row by row.
+    let idx: Vec<usize> = (0..k)
+        .flat_map(|j| [p.u_index(j), p.u_index(j) + 1])
+        .collect();
+    Some(
+        idx.iter()
+            .map(|&a| std::array::from_fn(|b| if b < idx.len() { cov[(a, idx[b])] } else { 0.0 }))
+            .collect(),
+    )
+}
+
+/// The bound at the truth for every pixel of a traced view, in the layout of
+/// `screen_cov.npy` (`[rows, columns, 4, 4]`, covariance of u1, v1, u2, v2,
+/// px², NaN where a reflection is absent): amplitudes `½·gain·weight`,
+/// background `gain·(ambient + ½ Σ weights)`, falloff `kappa = 1/τ_max²`,
+/// white noise `sigma` counts per frame.
+pub fn truth_cov_map(
+    design: &Design,
+    view: &crate::optics::trace::TracedView,
+    gain: f64,
+    ambient: f64,
+    kappa: f64,
+    sigma: f64,
+) -> Vec<f64> {
+    let mut out = vec![f64::NAN; view.pixels.len() * 16];
+    for (q, px) in view.pixels.iter().enumerate() {
+        let present: Vec<(usize, crate::optics::trace::ScreenHit)> = [px.front, px.back]
+            .into_iter()
+            .enumerate()
+            .filter_map(|(k, h)| h.ok().filter(|h| h.weight > 0.0).map(|h| (k, h)))
+            .collect();
+        if present.is_empty() {
+            continue;
+        }
+        let uv: Vec<[f64; 2]> = present.iter().map(|(_, h)| [h.u, h.v]).collect();
+        let amp: Vec<f64> = present.iter().map(|(_, h)| 0.5 * gain * h.weight).collect();
+        let offset = gain * (ambient + 0.5 * present.iter().map(|(_, h)| h.weight).sum::<f64>());
+        let Some(c) = reflections_cov(design, &uv, offset, &amp, kappa, sigma) else {
+            continue;
+        };
+        let slots: Vec<usize> = present
+            .iter()
+            .flat_map(|(k, _)| [2 * k, 2 * k + 1])
+            .collect();
+        for (a, row) in c.iter().enumerate() {
+            for (b, &sb) in slots.iter().enumerate() {
+                out[16 * q + 4 * slots[a] + sb] = row[b];
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,422 @@
+//! The surface pipeline: front by slopes, back by inverse ray tracing, both
+//! jointly, term selection, covariance.
+
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector};
+
+use super::front::{front_from_slopes, FrontReport};
+use super::lm::{levenberg_marquardt, LmOptions, LmReport};
+use super::problem::{Layout, Normal, Observations};
+use super::select::{choose_terms, TermChoice};
+use super::SurfaceError;
+use crate::optics::station::Station;
+use crate::optics::trace::Plate;
+use crate::optics::zernike::{ZernikeBasis, ZernikeSurface};
+
+/// What to solve for and how hard to try.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SurfaceOptions {
+    /// Fixed number of terms per surface; `None` chooses by BIC up to `max_terms`.
+    pub terms: Option<usize>,
+    /// Largest model considered when choosing.
+    pub max_terms: usize,
+    /// Levenberg–Marquardt stopping rules (back and joint stages).
+    pub lm: LmOptions,
+    /// Iterations of the front's reflection-point correction.
+    pub front_iter: usize,
+    /// The back's piston (thickness departure) is an unknown.
+    pub back_piston: bool,
+    /// Refine front and back jointly on S1 and S2.
+    pub joint: bool,
+    /// The element's rim beyond the aperture, mm.
+    pub edge_margin_mm: f64,
+    /// Weight by the covariance averaged over a `(2k + 1)²` pixel
+    /// neighbourhood (see [`Observations::smoothed_covariance`]); 0: as given.
+    pub covariance_smoothing_px: u32,
+}
+
+impl Default for SurfaceOptions {
+    fn default() -> Self {
+        SurfaceOptions {
+            terms: None,
+            max_terms: 66,
+            lm: LmOptions::default(),
+            front_iter: 20,
+            back_piston: false,
+            joint: true,
+            edge_margin_mm: crate::optics::trace::DEFAULT_EDGE_MARGIN_MM,
+            covariance_smoothing_px: 2,
+        }
+    }
+}
+
+/// One stage's account.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stage {
+    /// "front slopes", "back", "joint", "joint (chosen terms)".
+    pub name: &'static str,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// The slope iteration's report (front stage).
+    pub front: Option<FrontReport>,
+    /// The LM report (other stages).
+    pub lm: Option<LmReport>,
+}
+
+/// The reconstructed surfaces with their uncertainty.
+#[derive(Debug, Clone)]
+pub struct SurfaceSolution {
+    /// Front surface (piston 0: the reference plane).
+    pub front: ZernikeSurface,
+    /// Back surface (departure from `z = −thickness`); flat and not
+    /// reconstructed unless `back_fitted`.
+    pub back: ZernikeSurface,
+    /// Whether the back was reconstructed (some back reflection was measured).
+    pub back_fitted: bool,
+    /// Pixels `(column, row)` left out as outliers (χ² > [`OUTLIER_CHI2`]).
+    pub rejected: Vec<[u32; 2]>,
+    /// σ of every front coefficient, nm (0 for the fixed piston).
+    pub front_std_nm: Vec<f64>,
+    /// σ of every back coefficient, nm (0 where fixed).
+    pub back_std_nm: Vec<f64>,
+    /// Covariance of the free coefficients, nm², in `layout`'s column order.
+    pub covariance: DMatrix<f64>,
+    /// The final unknowns.
+    pub layout: Layout,
+    /// Stages run, in order.
+    pub stages: Vec<Stage>,
+    /// The term choice (front, back) when not fixed by the user.
+    pub choice: Option<[TermChoice; 2]>,
+    /// Final χ², residual components, and χ²/(N − p).
+    pub chi2: f64,
+    /// Residual components of the final fit.
+    pub n_resid: usize,
+    /// χ²/(N − p); ≈ 1 when the σ are right and the model suffices.
+    pub reduced_chi2: f64,
+    /// Factor applied to (JᵀJ)⁻¹: max(1, χ²_red) with known σ, χ²_red otherwise.
+    pub covariance_scale: f64,
+    /// Condition number of the weighted Jacobian (√ of that of JᵀJ).
+    pub condition_number: f64,
+}
+
+/// Runs every stage on `obs`.
+///
+/// # Errors
+/// [`SurfaceError`] when a stage cannot proceed (no data, ill-conditioned).
+pub fn reconstruct(
+    obs: &Observations,
+    station: &Station,
+    opts: &SurfaceOptions,
+) -> Result<SurfaceSolution, SurfaceError> {
+    let smoothed;
+    let obs = if opts.covariance_smoothing_px > 0 && obs.sigma_known {
+        smoothed = obs.smoothed_covariance(opts.covariance_smoothing_px);
+        &smoothed
+    } else {
+        obs
+    };
+    let e = &station.element;
+    let (radius, centre) = (
+        e.aperture_radius_mm,
+        [e.aperture_center_mm.x, e.aperture_center_mm.y],
+    );
+    let terms = opts.terms.unwrap_or(opts.max_terms).max(3);
+    let flat = ZernikeSurface::new(ZernikeBasis::new(terms, radius, centre)?, vec![0.0; terms])?;
+    let mut plate = Plate::new(station, flat.clone(), flat, opts.edge_margin_mm);
+    let mut stages = Vec::new();
+
+    let t = Instant::now();
+    let (front, rep) = front_from_slopes(obs, station, &plate, terms, opts.front_iter)?;
+    plate.front = front;
+    stages.push(Stage {
+        name: "front slopes",
+        seconds: t.elapsed().as_secs_f64(),
+        front: Some(rep),
+        lm: None,
+    });
+
+    let mut layout = Layout {
+        front_terms: terms,
+        back_terms: terms,
+        fit_front: false,
+        fit_back: true,
+        back_piston: opts.back_piston,
+        use_s1: false,
+        use_s2: true,
+    };
+    if obs.count(1) > 0 {
+        if opts.terms.is_none() {
+            determined_layout(obs, station, &mut plate, &mut layout)?;
+        }
+        lm_stage(obs, station, &mut plate, &layout, "back", opts, &mut stages)?;
+    }
+    layout.fit_front = true;
+    layout.use_s1 = true;
+    layout.fit_back = obs.count(1) > 0;
+    if opts.terms.is_none() {
+        determined_layout(obs, station, &mut plate, &mut layout)?;
+    }
+    let mut normal = if opts.joint || opts.terms.is_none() {
+        lm_stage(
+            obs,
+            station,
+            &mut plate,
+            &layout,
+            "joint",
+            opts,
+            &mut stages,
+        )?
+    } else {
+        super::problem::accumulate(obs, station, &plate, &layout, true)
+    };
+    let kept;
+    let rejected = outliers(obs, station, &plate, &layout);
+    let obs = if rejected.is_empty() {
+        obs
+    } else {
+        kept = without(obs, &rejected);
+        normal = lm_stage(
+            &kept,
+            station,
+            &mut plate,
+            &layout,
+            "joint (outliers out)",
+            opts,
+            &mut stages,
+        )?;
+        &kept
+    };
+    let mut choice = None;
+    if opts.terms.is_none() {
+        let x = free_values(&plate, &layout);
+        let f = choose_terms(&normal, &layout, &x, false, obs.sigma_known);
+        let b = choose_terms(&normal, &layout, &x, true, obs.sigma_known);
+        if let (Some(f), Some(b)) = (f, b) {
+            if f.terms != layout.front_terms || b.terms != layout.back_terms {
+                plate.front = truncate(&plate.front, f.terms)?;
+                plate.back = truncate(&plate.back, b.terms)?;
+                layout.front_terms = f.terms;
+                layout.back_terms = if layout.fit_back { b.terms } else { f.terms };
+                if !layout.fit_back {
+                    plate.back = truncate(&plate.back, f.terms)?;
+                }
+                normal = lm_stage(
+                    obs,
+                    station,
+                    &mut plate,
+                    &layout,
+                    "joint (chosen terms)",
+                    opts,
+                    &mut stages,
+                )?;
+            }
+            choice = Some([f, b]);
+        }
+    }
+    let mut sol = finish(plate, layout, normal, stages, choice, obs.sigma_known)?;
+    sol.rejected = obs.rejected.clone();
+    Ok(sol)
+}
+
+/// When the term count is the data's to choose: shrink the model (the
+/// back first, by full Noll orders, then the front) until its Jacobian at
+/// the current surfaces is conditioned below
+/// [`super::lm::MAX_CONDITION_NUMBER`]. The back is seen only where the
+/// refracted rays land, which a thick plate at oblique incidence shrinks.
+fn determined_layout(
+    obs: &Observations,
+    station: &Station,
+    plate: &mut Plate,
+    layout: &mut Layout,
+) -> Result<(), SurfaceError> {
+    loop {
+        let n = super::problem::accumulate(obs, station, plate, layout, true);
+        if super::lm::condition_number(&n) <= super::lm::MAX_CONDITION_NUMBER {
+            return Ok(());
+        }
+        let smaller = |t: usize| super::select::candidates(t).into_iter().rev().nth(1);
+        if let Some(t) = smaller(layout.back_terms).filter(|_| layout.fit_back) {
+            layout.back_terms = t;
+            plate.back = truncate(&plate.back, t)?;
+        } else if let Some(t) = smaller(layout.front_terms).filter(|_| layout.fit_front) {
+            layout.front_terms = t;
+            plate.front = truncate(&plate.front, t)?;
+        } else {
+            return Ok(()); // the stage itself reports the condition number
+        }
+    }
+}
+
+/// A pixel whose whitened χ² exceeds this (times the fit's scale, below)
+/// is an outlier: a wrong point from the spectral stage, e.g. a mislabelled
+/// pair at the rim. For a correct pixel χ² follows χ²(≤ 4 dof):
+/// P(χ²₄ > 49) ≈ 6e-10, so on 10⁵ pixels the rule rejects an honest one
+/// with probability < 1e-4.
+pub const OUTLIER_CHI2: f64 = 49.0;
+
+/// At most this fraction of the pixels is left out: beyond it the model,
+/// not a few points, is wrong, and the residuals say so (χ²/dof).
+const MAX_OUTLIER_FRACTION: f64 = 0.01;
+
+/// Pixels (indices into `obs.pixels`) whose χ² at the current fit exceeds
+/// [`OUTLIER_CHI2`] times the fit's scale: the median of χ²/(components)
+/// over the pixels divided by its expectation (≈ 0.75 for 2–4 components),
+/// at least 1 — so a model that fits every pixel equally badly rejects
+/// nothing, and neither does σ estimated from the residuals.
+fn outliers(obs: &Observations, station: &Station, plate: &Plate, layout: &Layout) -> Vec<usize> {
+    let chi2 = super::problem::pixel_chi2(obs, station, plate, layout);
+    let mut per: Vec<f64> = chi2
+        .iter()
+        .zip(&obs.pixels)
+        .filter(|(c, _)| c.is_finite())
+        .map(|(c, p)| {
+            let m = 2
+                * (usize::from(p.has(0) && layout.use_s1) + usize::from(p.has(1) && layout.use_s2));
+            c / m.max(1) as f64
+        })
+        .collect();
+    if per.is_empty() {
+        return Vec::new();
+    }
+    per.sort_by(f64::total_cmp);
+    let scale = (per[per.len() / 2] / 0.75).max(1.0);
+    let out: Vec<usize> = chi2
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| **c > OUTLIER_CHI2 * scale)
+        .map(|(k, _)| k)
+        .collect();
+    if out.len() as f64 > MAX_OUTLIER_FRACTION * obs.pixels.len() as f64 {
+        return Vec::new();
+    }
+    out
+}
+
+fn without(obs: &Observations, rejected: &[usize]) -> Observations {
+    let mut keep = vec![true; obs.pixels.len()];
+    rejected.iter().for_each(|&k| keep[k] = false);
+    Observations {
+        camera: obs.camera,
+        pixels: obs
+            .pixels
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect(),
+        sigma_known: obs.sigma_known,
+        rejected: obs
+            .rejected
+            .iter()
+            .copied()
+            .chain(rejected.iter().map(|&k| obs.pixels[k].pixel))
+            .collect(),
+    }
+}
+
+fn lm_stage(
+    obs: &Observations,
+    station: &Station,
+    plate: &mut Plate,
+    layout: &Layout,
+    name: &'static str,
+    opts: &SurfaceOptions,
+    stages: &mut Vec<Stage>,
+) -> Result<Normal, SurfaceError> {
+    let t = Instant::now();
+    let (rep, normal) = levenberg_marquardt(obs, station, plate, layout, name, &opts.lm)?;
+    stages.push(Stage {
+        name,
+        seconds: t.elapsed().as_secs_f64(),
+        front: None,
+        lm: Some(rep),
+    });
+    Ok(normal)
+}
+
+/// The free coefficients in column order.
+fn free_values(plate: &Plate, layout: &Layout) -> DVector<f64> {
+    let mut x = DVector::zeros(layout.columns());
+    for (k, c) in plate.front.coefficients_nm().iter().enumerate() {
+        if let Some(col) = layout.front_col(k) {
+            x[col] = *c;
+        }
+    }
+    for (k, c) in plate.back.coefficients_nm().iter().enumerate() {
+        if let Some(col) = layout.back_col(k) {
+            x[col] = *c;
+        }
+    }
+    x
+}
+
+fn truncate(s: &ZernikeSurface, terms: usize) -> Result<ZernikeSurface, SurfaceError> {
+    let b = s.basis();
+    let mut c = s.coefficients_nm().to_vec();
+    c.resize(terms, 0.0);
+    Ok(ZernikeSurface::new(
+        ZernikeBasis::new(terms, b.radius_mm(), b.center_mm())?,
+        c,
+    )?)
+}
+
+fn finish(
+    plate: Plate,
+    layout: Layout,
+    normal: Normal,
+    stages: Vec<Stage>,
+    choice: Option<[TermChoice; 2]>,
+    sigma_known: bool,
+) -> Result<SurfaceSolution, SurfaceError> {
+    let p = layout.columns();
+    let eig = normal.a.clone().symmetric_eigen().eigenvalues;
+    let (lo, hi) = (eig.min(), eig.max());
+    let condition_number = if lo > 0.0 {
+        (hi / lo).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    let inv =
+        normal
+            .a
+            .clone()
+            .cholesky()
+            .map(|c| c.inverse())
+            .ok_or(SurfaceError::IllConditioned {
+                stage: "covariance",
+                condition_number,
+            })?;
+    let dof = normal.n_resid.saturating_sub(p).max(1) as f64;
+    let reduced_chi2 = normal.chi2 / dof;
+    let covariance_scale = if sigma_known {
+        reduced_chi2.max(1.0)
+    } else {
+        reduced_chi2
+    };
+    let covariance = inv * covariance_scale;
+    let std_of = |n: usize, col: &dyn Fn(usize) -> Option<usize>| -> Vec<f64> {
+        (0..n)
+            .map(|k| col(k).map_or(0.0, |c| covariance[(c, c)].sqrt()))
+            .collect()
+    };
+    let front_std_nm = std_of(layout.front_terms, &|k| layout.front_col(k));
+    let back_std_nm = std_of(layout.back_terms, &|k| layout.back_col(k));
+    Ok(SurfaceSolution {
+        front: plate.front,
+        back: plate.back,
+        back_fitted: layout.fit_back,
+        rejected: Vec::new(),
+        front_std_nm,
+        back_std_nm,
+        covariance,
+        layout,
+        stages,
+        choice,
+        chi2: normal.chi2,
+        n_resid: normal.n_resid,
+        reduced_chi2,
+        covariance_scale,
+        condition_number,
+    })
+}
