@@ -85,5 +85,8 @@ fn fixture_is_unedited() {
     }
     listed.sort();
     present.sort();
-    assert_eq!(listed, present, "files added to or missing from the fixture copy");
+    assert_eq!(
+        listed, present,
+        "files added to or missing from the fixture copy"
+    );
 }
