@@ -18,7 +18,10 @@
 //! - [`acquire`]: fringe patterns, cameras, the display, the live sequencer
 //!   and the recorded acquisition folder.
 //! - [`solve`]: the spectral stage and the surface solvers.
-//! - [`report`]: what a result tells its reader (pictures).
+//! - [`pipeline`]: the stages as one call, `reconstruct(input, station,
+//!   options)`, and the result folder it writes.
+//! - [`report`]: what a result tells its reader (`summary.json`, pictures,
+//!   figures of merit against a truth).
 //! - [`formats`]: NPY, PNG/TIFF frames, `surfaces.json`.
 //! - [`sim`]: the whole simulated station (renderer, camera, scenes).
 //! - [`kernels`]: numeric kernels shared by the stages.
@@ -30,6 +33,7 @@ pub mod conventions;
 pub mod formats;
 pub mod kernels;
 pub mod optics;
+pub mod pipeline;
 pub mod report;
 pub mod sim;
 pub mod solve;

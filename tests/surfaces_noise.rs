@@ -9,10 +9,11 @@ use mfd::acquire::acquisition::FrameInfo;
 use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
+use mfd::report::metrics::rms_difference_nm;
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
 use mfd::solve::spectral::bound::truth_cov_map;
 use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
-use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::report::figures;
 use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 struct Outcome {

@@ -182,29 +182,29 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     // solve is per pixel and the cores stay busy) and hold (2 bytes per
     // pixel and frame): the goal is ≤ 10 s and ≤ 4 GiB.
     let scale = n_pix as f64 / fitted.max(1) as f64;
-    println!(
-        "{{\"bench\":\"spectral\",\"station\":{:?},\"pixels\":{fitted},\"sensor_pixels\":{n_pix},\
-         \"frames\":{},\"frames_per_s\":{:.1},\"latency_after_last_frame_s\":{solve_s:.2},\
-         \"solve_us_per_pixel\":{:.0},\"both_found\":{},\"series_bytes\":{},\
-         \"ingest_ms_per_frame\":{:.3},\"ingest_ms_per_frame_quiet\":{:.3},\"full_sensor_ingest_ms_per_frame\":{:.1},\"full_sensor_latency_s\":{:.0},\"full_sensor_series_bytes\":{},\"peak_rss_bytes\":{},\"threads\":{},\
-         \"engine\":{:?},\"nodes\":{:?},\"warm_starts\":{}}}",
-        args.station.display().to_string(),
-        frames.len(),
-        frames.len() as f64 / ingest_s,
-        solve_s * 1e6 / fitted.max(1) as f64,
-        maps.found_both(),
-        solver.series_bytes(),
-        busy_s * 1e3 / frames.len() as f64,
-        quiet_ms,
-        quiet_ms * scale,
-        solve_s * scale,
-        (solver.series_bytes() as f64 * scale).round() as u64,
-        peak_rss_bytes().unwrap_or(0),
-        rayon::current_num_threads(),
-        if solver.statistics_nodes().is_some() { "statistics" } else { "series" },
-        solver.statistics_nodes().unwrap_or_default(),
-        !args.search_every_pixel
-    );
+    let nodes = solver.statistics_nodes();
+    print_json(&serde_json::json!({
+        "bench": "spectral",
+        "station": args.station.display().to_string(),
+        "pixels": fitted,
+        "sensor_pixels": n_pix,
+        "frames": frames.len(),
+        "frames_per_s": round(frames.len() as f64 / ingest_s, 1),
+        "latency_after_last_frame_s": round(solve_s, 2),
+        "solve_us_per_pixel": round(solve_s * 1e6 / fitted.max(1) as f64, 0),
+        "both_found": maps.found_both(),
+        "series_bytes": solver.series_bytes(),
+        "ingest_ms_per_frame": round(busy_s * 1e3 / frames.len() as f64, 3),
+        "ingest_ms_per_frame_quiet": round(quiet_ms, 3),
+        "full_sensor_ingest_ms_per_frame": round(quiet_ms * scale, 1),
+        "full_sensor_latency_s": round(solve_s * scale, 0),
+        "full_sensor_series_bytes": (solver.series_bytes() as f64 * scale).round() as u64,
+        "peak_rss_bytes": peak_rss_bytes().unwrap_or(0),
+        "threads": rayon::current_num_threads(),
+        "engine": if nodes.is_some() { "statistics" } else { "series" },
+        "nodes": nodes.unwrap_or_default(),
+        "warm_starts": !args.search_every_pixel,
+    }));
     Ok(())
 }
 
@@ -244,18 +244,30 @@ fn render(args: &RenderArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|p| p.front.is_ok() || p.back.is_ok())
         .count();
-    println!(
-        "{{\"bench\":\"render\",\"station\":{:?},\"pixels\":{},\"lit_pixels\":{},\"both_paths\":{},\
-         \"frames\":{},\"trace_s\":{:.3},\"ms_per_frame\":{:.3},\"ms_per_frame_noisy\":{:.3},\
-         \"threads_render\":1}}",
-        args.station.display().to_string(),
-        station.camera.pixel_count(),
-        lit,
-        view.count(1),
-        n,
-        trace_s,
-        exact,
-        noisy
-    );
+    print_json(&serde_json::json!({
+        "bench": "render",
+        "station": args.station.display().to_string(),
+        "pixels": station.camera.pixel_count(),
+        "lit_pixels": lit,
+        "both_paths": view.count(1),
+        "frames": n,
+        "trace_s": round(trace_s, 3),
+        "ms_per_frame": round(exact, 3),
+        "ms_per_frame_noisy": round(noisy, 3),
+        "threads_render": 1,
+    }));
     Ok(())
+}
+
+/// One benchmark's figures as one JSON line on stdout (what `scripts/bench.sh`
+/// collects and a user's `jq` reads).
+pub fn print_json(figures: &serde_json::Value) {
+    println!("{figures}");
+}
+
+/// `x` rounded to `digits` decimals: the figures' precision, not the
+/// float's (NaN stays NaN and is written as `null`).
+pub fn round(x: f64, digits: i32) -> f64 {
+    let scale = 10f64.powi(digits);
+    (x * scale).round() / scale
 }

@@ -12,8 +12,9 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
+use mfd::report::metrics::rms_difference_nm;
 use mfd::sim::RandomSurfaceSpec;
-use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::report::figures;
 use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 /// Arguments of `mfd bench extremes`.
@@ -25,6 +26,69 @@ pub struct ExtremesArgs {
     /// Seed of the surfaces and the noise.
     #[arg(long, default_value_t = 3)]
     seed: u64,
+    /// Print a markdown table instead of one JSON line per case.
+    #[arg(long)]
+    markdown: bool,
+}
+
+/// One case's figures.
+struct Outcome {
+    points: [usize; 2],
+    noise_free_nm: [f64; 2],
+    iterations: Vec<usize>,
+    /// Error ÷ reported bound and the bounds (nm), front and back, with noise.
+    noisy: Result<([f64; 2], [f64; 2]), String>,
+    seconds: f64,
+    converged: bool,
+    condition_number: f64,
+}
+
+impl Outcome {
+    fn markdown(&self) -> String {
+        let noisy = match &self.noisy {
+            Ok((r, b)) => format!(
+                "{:.2} / {:.2} (bounds {:.2} / {:.2} nm)",
+                r[0], r[1], b[0], b[1]
+            ),
+            Err(e) => format!("stopped: {e}"),
+        };
+        let iters: Vec<String> = self.iterations.iter().map(|i| i.to_string()).collect();
+        format!(
+            "| {} / {} | {:.1e} / {:.1e}, {} | {noisy} | {:.2} | {}, κ = {:.1e} |",
+            self.points[0],
+            self.points[1],
+            self.noise_free_nm[0],
+            self.noise_free_nm[1],
+            iters.join("+"),
+            self.seconds,
+            if self.converged {
+                "converged"
+            } else {
+                "not converged"
+            },
+            self.condition_number
+        )
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let (ratio, bound, stopped) = match &self.noisy {
+            Ok((r, b)) => (Some(r), Some(b), None),
+            Err(e) => (None, None, Some(e.as_str())),
+        };
+        serde_json::json!({
+            "pixels_s1": self.points[0],
+            "pixels_s2": self.points[1],
+            "noise_free_front_rms_err_nm": self.noise_free_nm[0],
+            "noise_free_back_rms_err_nm": self.noise_free_nm[1],
+            "iterations": self.iterations,
+            "noisy_error_over_bound": ratio,
+            "noisy_bound_nm": bound,
+            "noisy_stopped": stopped,
+            "seconds": super::bench::round(self.seconds, 3),
+            "converged": self.converged,
+            "condition_number": self.condition_number,
+        })
+    }
 }
 
 /// One scenario: plate, geometry, model size, back departure.
@@ -72,29 +136,56 @@ const CASES: [Case; 14] = [
     ),
 ];
 
-/// Runs `mfd bench extremes`.
+/// Runs `mfd bench extremes`: one JSON line per case, or a markdown table.
 pub fn run(args: &ExtremesArgs) -> anyhow::Result<()> {
-    println!(
-        "| case | t (mm) | n | tilt (°) | terms | back RMS (nm) | S1 / S2 px | noise-free: front / back error (nm), iterations | \
-         σ = {} px: front / back error ÷ bound | time (s) | outcome |",
-        args.sigma_px
-    );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    if args.markdown {
+        println!(
+            "| case | t (mm) | n | tilt (°) | terms | back RMS (nm) | S1 / S2 px | noise-free: front / back error (nm), iterations | \
+             σ = {} px: front / back error ÷ bound | time (s) | outcome |",
+            args.sigma_px
+        );
+        println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    }
     for c in &CASES {
         let station = mfd::optics::station::bench_station(c.thickness_mm, c.index, c.tilt_deg)?;
-        let row = match one(&station, c, args) {
-            Ok(r) => r,
-            Err(e) => format!("| – | – | – | – | stopped: {} |", crate::error_chain(&e)),
-        };
-        println!(
-            "| {} | {} | {} | {} | {} | {} {row}",
-            c.name, c.thickness_mm, c.index, c.tilt_deg, c.terms, c.back_rms_nm
-        );
+        let outcome = one(&station, c, args);
+        if args.markdown {
+            let row = match &outcome {
+                Ok(o) => o.markdown(),
+                Err(e) => format!("| – | – | – | – | stopped: {} |", crate::error_chain(e)),
+            };
+            println!(
+                "| {} | {} | {} | {} | {} | {} {row}",
+                c.name, c.thickness_mm, c.index, c.tilt_deg, c.terms, c.back_rms_nm
+            );
+            continue;
+        }
+        let mut figures = serde_json::json!({
+            "bench": "extremes",
+            "case": c.name,
+            "thickness_mm": c.thickness_mm,
+            "index": c.index,
+            "tilt_deg": c.tilt_deg,
+            "terms": c.terms,
+            "back_rms_nm": c.back_rms_nm,
+            "sigma_px": args.sigma_px,
+        });
+        match &outcome {
+            Ok(o) => {
+                if let (Some(f), serde_json::Value::Object(more)) =
+                    (figures.as_object_mut(), o.json())
+                {
+                    f.extend(more);
+                }
+            }
+            Err(e) => figures["stopped"] = crate::error_chain(e).into(),
+        }
+        super::bench::print_json(&figures);
     }
     Ok(())
 }
 
-fn one(station: &Station, c: &Case, args: &ExtremesArgs) -> anyhow::Result<String> {
+fn one(station: &Station, c: &Case, args: &ExtremesArgs) -> anyhow::Result<Outcome> {
     let e = &station.element;
     let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
     let spec = RandomSurfaceSpec {
@@ -123,16 +214,14 @@ fn one(station: &Station, c: &Case, args: &ExtremesArgs) -> anyhow::Result<Strin
     let obs = Observations::from_maps(station, &coords, Uncertainty::Unknown)?;
     let (n1, n2) = (obs.count(0), obs.count(1));
     let sol = reconstruct(&obs, station, &opts)?;
-    let iters: Vec<String> = sol
+    let iterations: Vec<usize> = sol
         .stages
         .iter()
         .map(|s| {
-            s.lm.as_ref()
-                .map_or_else(
-                    || s.front.as_ref().map_or(0, |f| f.iterations),
-                    |l| l.iterations,
-                )
-                .to_string()
+            s.lm.as_ref().map_or_else(
+                || s.front.as_ref().map_or(0, |f| f.iterations),
+                |l| l.iterations,
+            )
         })
         .collect();
     let ef = rms_difference_nm(sol.front.coefficients_nm(), front.coefficients_nm());
@@ -148,36 +237,30 @@ fn one(station: &Station, c: &Case, args: &ExtremesArgs) -> anyhow::Result<Strin
         .collect();
     let std = vec![args.sigma_px; coords.len()];
     let obs_n = Observations::from_maps(station, &noisy, Uncertainty::Std(&std))?;
-    let noisy_part = match reconstruct(&obs_n, station, &opts) {
+    let noisy = match reconstruct(&obs_n, station, &opts) {
         Ok(s) => {
-            let (bf, bb) = (
+            let bound = [
                 figures(&s, false).error_rms_nm,
                 figures(&s, true).error_rms_nm,
-            );
+            ];
             let nf = rms_difference_nm(s.front.coefficients_nm(), front.coefficients_nm());
             let nb = rms_difference_nm(s.back.coefficients_nm(), back.coefficients_nm());
-            format!(
-                "{:.2} / {:.2} (bounds {bf:.2} / {bb:.2} nm)",
-                nf / bf,
-                nb / bb
-            )
+            Ok(([nf / bound[0], nb / bound[1]], bound))
         }
-        Err(e) => format!("stopped: {e}"),
+        Err(e) => Err(e.to_string()),
     };
     let converged = sol
         .stages
         .iter()
         .filter_map(|s| s.lm.as_ref())
         .all(|l| l.converged);
-    Ok(format!(
-        "| {n1} / {n2} | {ef:.1e} / {eb:.1e}, {} | {noisy_part} | {:.2} | {}, κ = {:.1e} |",
-        iters.join("+"),
-        t.elapsed().as_secs_f64(),
-        if converged {
-            "converged"
-        } else {
-            "not converged"
-        },
-        sol.condition_number
-    ))
+    Ok(Outcome {
+        points: [n1, n2],
+        noise_free_nm: [ef, eb],
+        iterations,
+        noisy,
+        seconds: t.elapsed().as_secs_f64(),
+        converged,
+        condition_number: sol.condition_number,
+    })
 }

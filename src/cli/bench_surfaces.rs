@@ -12,8 +12,9 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::report::metrics::rms_difference_nm;
 use mfd::sim::RandomSurfaceSpec;
-use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::report::figures;
 use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 /// Arguments of `mfd bench surfaces`.
@@ -100,32 +101,29 @@ pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
         })
     };
     let (ff, fb) = (figures(&sol, false), figures(&sol, true));
-    println!(
-        "{{\"bench\":\"surfaces\",\"station\":\"{}\",\"terms\":{},\"pixels_s1\":{},\"pixels_s2\":{},\
-         \"sigma_px\":[{},{}],\"trace_s\":{trace_s:.3},\"front_s\":{:.3},\"front_iterations\":{},\
-         \"back_s\":{:.3},\"back_iterations\":{},\"joint_s\":{:.3},\"joint_iterations\":{},\
-         \"total_s\":{total_s:.3},\"front_rms_err_nm\":{:.4e},\"back_rms_err_nm\":{:.4e},\
-         \"front_bound_nm\":{:.4},\"back_bound_nm\":{:.4},\"reduced_chi2\":{:.4},\
-         \"condition_number\":{:.4e},\"threads\":{}}}",
-        args.station.display(),
-        args.terms,
-        obs.count(0),
-        obs.count(1),
-        args.sigma1_px,
-        args.sigma2_px,
-        secs("front slopes"),
-        iters("front slopes"),
-        secs("back"),
-        iters("back"),
-        secs("joint"),
-        iters("joint"),
-        rms_difference_nm(sol.front.coefficients_nm(), front.coefficients_nm()),
-        rms_difference_nm(sol.back.coefficients_nm(), back.coefficients_nm()),
-        ff.error_rms_nm,
-        fb.error_rms_nm,
-        sol.reduced_chi2,
-        sol.condition_number,
-        rayon::current_num_threads()
-    );
+    use super::bench::{print_json, round};
+    print_json(&serde_json::json!({
+        "bench": "surfaces",
+        "station": args.station.display().to_string(),
+        "terms": args.terms,
+        "pixels_s1": obs.count(0),
+        "pixels_s2": obs.count(1),
+        "sigma_px": [args.sigma1_px, args.sigma2_px],
+        "trace_s": round(trace_s, 3),
+        "front_s": round(secs("front slopes"), 3),
+        "front_iterations": iters("front slopes"),
+        "back_s": round(secs("back"), 3),
+        "back_iterations": iters("back"),
+        "joint_s": round(secs("joint"), 3),
+        "joint_iterations": iters("joint"),
+        "total_s": round(total_s, 3),
+        "front_rms_err_nm": rms_difference_nm(sol.front.coefficients_nm(), front.coefficients_nm()),
+        "back_rms_err_nm": rms_difference_nm(sol.back.coefficients_nm(), back.coefficients_nm()),
+        "front_bound_nm": round(ff.error_rms_nm, 4),
+        "back_bound_nm": round(fb.error_rms_nm, 4),
+        "reduced_chi2": round(sol.reduced_chi2, 4),
+        "condition_number": sol.condition_number,
+        "threads": rayon::current_num_threads(),
+    }));
     Ok(())
 }

@@ -26,6 +26,9 @@ pub struct TableArgs {
     /// Spectral engine: auto, series or statistics.
     #[arg(long, default_value = "auto")]
     engine: String,
+    /// Print a markdown table instead of one JSON line per row.
+    #[arg(long)]
+    markdown: bool,
 }
 
 /// The 48 × 48 bench station ([`mfd::optics::station::bench_station`]) at 15°.
@@ -37,23 +40,31 @@ pub fn small_station(thickness_mm: f64, index: f64) -> anyhow::Result<Station> {
     )?)
 }
 
-/// Runs `mfd bench thickness`: prints a markdown table.
+/// Runs `mfd bench thickness`: one JSON line per plate, or a markdown table.
 pub fn run(args: &TableArgs) -> anyhow::Result<()> {
-    println!(
+    if args.markdown {
+        println!(
         "| t (mm) | n | S2−S1 (bins) | found | S1 error/bound | S2 error/bound | S1 RMS error (px) | \
          RMS(error/reported σ) | flagged |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|---|---|---|");
+    }
     let engine = super::parse_engine(&args.engine)?;
     for &n in &args.index {
         for &t in &args.thickness_mm {
-            row(t, n, args.noise, engine)?;
+            row(t, n, args.noise, engine, args.markdown)?;
         }
     }
     Ok(())
 }
 
-fn row(t: f64, n: f64, noise: f64, engine: mfd::solve::spectral::Engine) -> anyhow::Result<()> {
+fn row(
+    t: f64,
+    n: f64,
+    noise: f64,
+    engine: mfd::solve::spectral::Engine,
+    markdown: bool,
+) -> anyhow::Result<()> {
     let station = small_station(t, n)?;
     let (front, back) = RandomSurfaceSpec::default().draw_pair(25.5, [0.0, 0.0], 31)?;
     let view = TracedView::trace(&station, &Plate::new(&station, front, back, 3.0));
@@ -115,12 +126,29 @@ fn row(t: f64, n: f64, noise: f64, engine: mfd::solve::spectral::Engine) -> anyh
     seps.sort_by(f64::total_cmp);
     let median_sep = seps.get(seps.len() / 2).copied().unwrap_or(f64::NAN);
     let ratio = |k: usize| (e2[k] / b2[k]).sqrt();
-    println!(
-        "| {t} | {n} | {median_sep:.2} | {found}/{total} | {:.2} | {:.2} | {:.3} | {:.2} | {flagged} |",
-        ratio(0),
-        ratio(1),
-        (e2[0] / found.max(1) as f64).sqrt(),
-        (z2 / (4 * found.max(1)) as f64).sqrt()
-    );
+    let rms_s1 = (e2[0] / found.max(1) as f64).sqrt();
+    let z = (z2 / (4 * found.max(1)) as f64).sqrt();
+    if markdown {
+        println!(
+            "| {t} | {n} | {median_sep:.2} | {found}/{total} | {:.2} | {:.2} | {rms_s1:.3} | {z:.2} | {flagged} |",
+            ratio(0),
+            ratio(1),
+        );
+    } else {
+        use super::bench::{print_json, round};
+        print_json(&serde_json::json!({
+            "bench": "thickness",
+            "thickness_mm": t,
+            "index": n,
+            "median_separation_bins": round(median_sep, 2),
+            "found": found,
+            "pixels": total,
+            "s1_error_over_bound": round(ratio(0), 3),
+            "s2_error_over_bound": round(ratio(1), 3),
+            "s1_rms_error_px": round(rms_s1, 4),
+            "rms_error_over_reported_sigma": round(z, 3),
+            "flagged": flagged,
+        }));
+    }
     Ok(())
 }

@@ -7,7 +7,7 @@ use clap::Args;
 
 use mfd::formats::npy;
 use mfd::formats::surfaces_file::SurfacesFile;
-use mfd::solve::surfaces::report::rms_difference_nm;
+use mfd::report::metrics::{rms_difference_nm, score_screen_points};
 
 /// Arguments of `mfd compare`.
 #[derive(Args)]
@@ -107,38 +107,21 @@ fn compare_points(
         }
         None => None,
     };
-    for (k, name) in ["S1 (front)", "S2 (back)"].iter().enumerate() {
-        let (mut expected, mut found, mut e2, mut s2, mut z2, mut worst) =
-            (0usize, 0usize, 0.0, 0.0, 0.0, 0.0f64);
-        for p in 0..ours.len() / 4 {
-            let at = p * 4 + 2 * k;
-            if truth[at].is_nan() {
-                continue;
-            }
-            expected += 1;
-            if ours[at].is_nan() {
-                continue;
-            }
-            found += 1;
-            let (du, dv) = (ours[at] - truth[at], ours[at + 1] - truth[at + 1]);
-            e2 += du * du + dv * dv;
-            worst = worst.max(du.hypot(dv));
-            if let Some(s) = &std {
-                s2 += s[at] * s[at] + s[at + 1] * s[at + 1];
-                z2 += (du / s[at]).powi(2) + (dv / s[at + 1]).powi(2);
-            }
-        }
-        let n = found.max(1) as f64;
+    let scores = score_screen_points(&ours, &truth, std.as_deref());
+    for (score, name) in scores.iter().zip(["S1 (front)", "S2 (back)"]) {
         print!(
-            "{name}: found {found}/{expected} ({:.2} %), RMS error {:.4} px, worst {worst:.4} px",
-            100.0 * found as f64 / expected.max(1) as f64,
-            (e2 / n).sqrt()
+            "{name}: found {}/{} ({:.2} %), RMS error {:.4} px, worst {:.4} px",
+            score.found,
+            score.expected,
+            100.0 * score.found_fraction(),
+            score.rms_error_px(),
+            score.worst_px()
         );
         if std.is_some() {
             print!(
                 ", RMS reported σ {:.4} px, RMS(error/σ) per coordinate {:.3}",
-                (s2 / n).sqrt(),
-                (z2 / (2.0 * n)).sqrt()
+                score.rms_reported_px(),
+                score.rms_error_over_sigma()
             );
         }
         println!();

@@ -2,7 +2,7 @@
 //! arrives and reconstructed at the end with the same stages as
 //! `mfd reconstruct`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -11,21 +11,15 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use mfd::acquire::acquisition::{Acquisition, FrameInfo};
 use mfd::acquire::camera::{
-    self, Camera, CameraConfig, CameraSpec, PixelFormat, ScreenState, SimFaults, SimulatedCamera,
-    TriggerMode,
+    self, CameraConfig, CameraSpec, PixelFormat, ScreenState, SimFaults, SimulatedCamera,
 };
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::acquire::live::{
-    acquire, Counters, FrameSink, MirroredDisplay, Recorder, Report, SequencerConfig, Session,
-    SolverSink,
-};
-use mfd::acquire::patterns::Pattern;
+use mfd::acquire::live::{Counters, Measurement, MirroredDisplay, Report, SequencerConfig, Start};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::pipeline::{self, Input, Options};
 use mfd::sim::{SimCamera, SimParams};
-use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
 
 use super::simulate::ScheduleArgs;
 
@@ -192,51 +186,61 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
     } else {
         None
     };
-    let mut camera = camera::open(&spec, sim)?;
+    let camera = camera::open(&spec, sim)?;
     if spec.is_simulated() {
         display = Box::new(MirroredDisplay::new(display, screen));
     }
-    let trigger = configure(camera.as_mut(), args, &station)?;
-    let dir = args.out.join("acquisition");
-    let mut recorder = if args.resume {
-        Recorder::resume(&dir, &patterns)?
-    } else {
-        Recorder::create(&dir, &station, &patterns, args.overwrite)?
+    let simulated = camera.describe().backend == "sim" || args.camera == "aravis:fake";
+    let camera_config = CameraConfig {
+        exposure_us: args.exposure_us,
+        gain_db: args.gain_db,
+        pixel_format: simulated
+            .then(|| PixelFormat::from_bit_depth(args.bit_depth))
+            .flatten(),
+        frame_rate_hz: args.frame_rate,
+        ..CameraConfig::default()
     };
-    let mut solver = (!args.no_reconstruct)
-        .then(|| {
-            let config = args.spectral.config()?;
-            start_solver(&station, &patterns, &dir, recorder.recorded(), config)
-        })
+    let start = if args.resume {
+        Start::Resume
+    } else {
+        Start::New {
+            overwrite: args.overwrite,
+        }
+    };
+    let solver = (!args.no_reconstruct)
+        .then(|| args.spectral.config())
         .transpose()?;
-    let first = recorder.recorded();
+    let sequencer = SequencerConfig {
+        frame_timeout: Duration::from_millis(args.frame_timeout_ms),
+        max_reshoots: args.max_reshoots,
+        capacity: args.ring,
+    };
+    let dir = args.out.join("acquisition");
+    let mut measurement = Measurement::prepare(
+        &station,
+        patterns,
+        camera,
+        display,
+        camera_config,
+        &dir,
+        start,
+        solver,
+        sequencer,
+    )?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .context("installing the Ctrl-C handler")?;
-    camera.start()?;
-    let session = Session {
-        camera: camera.as_mut(),
-        display: display.as_mut(),
-        patterns: &patterns,
-        first,
-        trigger,
-        resolution: (station.camera.width, station.camera.height),
-        config: SequencerConfig {
-            frame_timeout: Duration::from_millis(args.frame_timeout_ms),
-            max_reshoots: args.max_reshoots,
-            capacity: args.ring,
-        },
-        stop: &stop,
-    };
     let t0 = Instant::now();
-    let result = run_session(session, &mut recorder, solver.as_mut());
-    if let Err(e) = camera.stop() {
-        eprintln!("warning: stopping the camera: {e}");
-    }
-    let report = result.with_context(|| kept(&recorder, patterns.len()))?;
-    summarise(&report, camera.as_ref(), &recorder);
-    finish(args, &report, solver.as_ref(), t0.elapsed().as_secs_f64())
+    let report = run_session(&mut measurement, &stop)?;
+    summarise(&report, &measurement);
+    finish(
+        args,
+        &station,
+        &report,
+        &mut measurement,
+        t0.elapsed().as_secs_f64(),
+    )
 }
 
 /// The display `--display` names when it is not a monitor: `offscreen` is
@@ -302,80 +306,15 @@ fn simulated_camera(
     Ok(SimulatedCamera::new(renderer, screen, faults))
 }
 
-/// Configures the camera; returns the trigger mode in use.
-fn configure(
-    camera: &mut dyn Camera,
-    args: &MeasureArgs,
-    station: &Station,
-) -> anyhow::Result<TriggerMode> {
-    let info = camera.describe();
-    let trigger = if info.software_trigger {
-        TriggerMode::Software
-    } else {
-        TriggerMode::FreeRunning
-    };
-    let sim = info.backend == "sim" || args.camera == "aravis:fake";
-    let config = CameraConfig {
-        exposure_us: args.exposure_us,
-        gain_db: args.gain_db,
-        pixel_format: sim
-            .then(|| PixelFormat::from_bit_depth(args.bit_depth))
-            .flatten(),
-        trigger,
-        frame_rate_hz: args.frame_rate,
-        ..CameraConfig::default()
-    };
-    camera.configure(&config)?;
-    let res = camera.describe().resolution;
-    let want = (station.camera.width, station.camera.height);
-    anyhow::ensure!(
-        res == want,
-        "camera {} delivers {}x{} frames, the station says {}x{} ({})",
-        info.id,
-        res.0,
-        res.1,
-        want.0,
-        want.1,
-        "fix the station's [camera] resolution or the camera's region"
-    );
-    Ok(trigger)
-}
-
-/// The spectral solver for the whole schedule, fed with the frames a
-/// resumed acquisition already holds.
-fn start_solver(
-    station: &Station,
-    patterns: &[Pattern],
-    dir: &Path,
-    recorded: usize,
-    config: SpectralConfig,
-) -> anyhow::Result<SpectralSolver> {
-    let frames = FrameInfo::from_patterns(patterns);
-    let mut solver = SpectralSolver::new(station, &frames, config)?;
-    if recorded > 0 {
-        let acq = Acquisition::open(dir)?;
-        let mut frame = Vec::new();
-        for index in 0..recorded {
-            acq.read_frame(index, &mut frame)?;
-            solver.push_frame(index, &frame)?;
-        }
-    }
-    Ok(solver)
-}
-
-fn run_session(
-    session: Session<'_>,
-    recorder: &mut Recorder,
-    solver: Option<&mut SpectralSolver>,
-) -> anyhow::Result<Report> {
-    let total = session.patterns.len() as u64;
+fn run_session(measurement: &mut Measurement<'_>, stop: &AtomicBool) -> anyhow::Result<Report> {
+    let total = measurement.patterns().len() as u64;
     let bar = ProgressBar::new(total).with_style(
         ProgressStyle::with_template(
             "[{bar:30}] {pos}/{len} frames, {msg}, {elapsed} elapsed, eta {eta}",
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    bar.set_position(session.first as u64);
+    bar.set_position(measurement.recorded() as u64);
     let mut progress = |c: &Counters| {
         bar.set_position((c.first + c.captured) as u64);
         bar.set_message(format!(
@@ -386,26 +325,13 @@ fn run_session(
             c.backpressure_waits
         ));
     };
-    let mut solver_sink = solver.map(|solver| SolverSink { solver });
-    let mut sinks: Vec<&mut dyn FrameSink> = vec![recorder];
-    if let Some(s) = solver_sink.as_mut() {
-        sinks.push(s);
-    }
-    let report = acquire(session, &mut sinks, &mut progress);
+    let report = measurement.run(stop, &mut progress);
     bar.finish_and_clear();
     Ok(report?)
 }
 
-/// What is on disk after a failure, for the error message.
-fn kept(recorder: &Recorder, total: usize) -> String {
-    format!(
-        "{} of {total} frames are recorded in {} (continue with --resume)",
-        recorder.recorded(),
-        recorder.dir().display()
-    )
-}
-
-fn summarise(report: &Report, camera: &dyn Camera, recorder: &Recorder) {
+fn summarise(report: &Report, measurement: &Measurement<'_>) {
+    let camera = measurement.camera();
     let c = &report.counters;
     println!(
         "{} {} frames in {:.1} s ({:.1} frames/s); {} of {} recorded in {}",
@@ -417,9 +343,9 @@ fn summarise(report: &Report, camera: &dyn Camera, recorder: &Recorder) {
         c.captured,
         c.elapsed_s,
         c.frames_per_s(),
-        recorder.recorded(),
+        measurement.recorded(),
         c.total,
-        recorder.dir().display()
+        measurement.dir().display()
     );
     println!(
         "  re-shoots {} (timeouts {}, mismatched frames {}, incomplete {}); \
@@ -452,8 +378,9 @@ fn summarise(report: &Report, camera: &dyn Camera, recorder: &Recorder) {
 
 fn finish(
     args: &MeasureArgs,
+    station: &Station,
     report: &Report,
-    solver: Option<&SpectralSolver>,
+    measurement: &mut Measurement<'_>,
     acquire_s: f64,
 ) -> anyhow::Result<()> {
     if report.interrupted {
@@ -464,21 +391,18 @@ fn finish(
         );
         return Ok(());
     }
-    match solver {
-        Some(solver) => {
-            let station = Station::load(&args.station)?;
-            let opts = args
-                .surfaces
-                .options(mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM)?;
-            let surfaces = (!args.surfaces.no_surfaces).then_some(&opts);
-            super::reconstruct::solve_and_write(
-                solver,
-                &station,
-                &args.out.join("result"),
-                acquire_s,
-                surfaces,
-            )
-        }
-        None => Ok(()),
+    let Some(solver) = measurement.solver_mut() else {
+        return Ok(());
+    };
+    let opts = args.surfaces.options(DEFAULT_EDGE_MARGIN_MM)?;
+    let options = Options {
+        surfaces: (!args.surfaces.no_surfaces).then_some(opts),
+        ..Options::default()
+    };
+    let mut rec =
+        pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut |_, _| {})?;
+    if let Some(s) = rec.spectral.as_mut() {
+        s.read_s = acquire_s;
     }
+    super::reconstruct::write_and_print(&rec, &args.out.join("result"))
 }

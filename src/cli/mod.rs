@@ -7,7 +7,6 @@ pub mod bench_table;
 pub mod compare;
 pub mod display;
 pub mod measure;
-pub mod pictures;
 pub mod reconstruct;
 pub mod simulate;
 pub mod station;

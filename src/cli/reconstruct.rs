@@ -2,17 +2,15 @@
 //! acquisition folder.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
-use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use mfd::acquire::acquisition::Acquisition;
 use mfd::optics::station::Station;
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
-use mfd::solve::spectral::{flags, SpectralConfig, SpectralMaps, SpectralSolver};
-use mfd::solve::surfaces::Uncertainty;
+use mfd::pipeline::{self, Input, Options, Reconstruction, ScreenPoints};
+use mfd::solve::spectral::{flags, SpectralConfig, SpectralMaps};
 
 /// Arguments of `mfd reconstruct`.
 #[derive(Args)]
@@ -79,10 +77,9 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         anyhow::bail!("--roi takes four numbers x0,y0,x1,y1");
     }
     let surface_opts = args.surfaces.options(args.edge_margin_mm)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    let surfaces = (!args.surfaces.no_surfaces).then_some(surface_opts);
     let Some(acq_dir) = &args.acquisition else {
-        return from_screen_coords(args, &surface_opts);
+        return from_screen_coords(args, surfaces);
     };
     let mut acq = Acquisition::open(acq_dir)?;
     let station_path = args
@@ -90,122 +87,78 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| acq.station_path().to_path_buf());
     let station = Station::load(&station_path)?;
-    acq.check_resolution(station.camera.width, station.camera.height)?;
-    let config = SpectralConfig {
-        tau_max_guess: args.tau_max_guess,
-        third_reflection: args.third_reflection,
-        saturation_counts: args.saturation,
-        margin_px: args.margin_px,
-        edge_margin_mm: args.edge_margin_mm,
-        roi: args.roi.as_ref().map(|r| [r[0], r[1], r[2], r[3]]),
-        ..args.spectral.config()?
+    let options = Options {
+        spectral: SpectralConfig {
+            tau_max_guess: args.tau_max_guess,
+            third_reflection: args.third_reflection,
+            saturation_counts: args.saturation,
+            margin_px: args.margin_px,
+            edge_margin_mm: args.edge_margin_mm,
+            roi: args.roi.as_ref().map(|r| [r[0], r[1], r[2], r[3]]),
+            ..args.spectral.config()?
+        },
+        surfaces,
     };
-    let t0 = Instant::now();
-    let mut solver = SpectralSolver::new(&station, acq.frames(), config)?;
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.set_message("reading");
-    let mut frame = Vec::new();
-    for f in acq.frames() {
-        acq.read_frame(f.index, &mut frame)?;
-        solver.push_frame(f.index, &frame)?;
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    let surfaces = (!args.surfaces.no_surfaces).then_some(&surface_opts);
-    solve_and_write(
-        &solver,
+    let result = pipeline::reconstruct(
+        Input::Acquisition(&mut acq),
         &station,
-        &args.out,
-        t0.elapsed().as_secs_f64(),
-        surfaces,
-    )
+        &options,
+        &mut |done, _| bar.set_position(done as u64),
+    );
+    bar.finish_and_clear();
+    write_and_print(&result?, &args.out)
 }
 
-/// The stages after the frames are in: the spectral solve, its maps, and
-/// (with `surfaces`) the surface stage, all written into `out`; prints the
-/// summaries (`read_s`: seconds spent getting the frames). `mfd measure`
-/// calls this with its streamed solver.
-pub fn solve_and_write(
-    solver: &SpectralSolver,
-    station: &Station,
-    out: &std::path::Path,
-    read_s: f64,
-    surfaces: Option<&mfd::solve::surfaces::SurfaceOptions>,
-) -> anyhow::Result<()> {
-    let t1 = Instant::now();
-    let maps = solver.solve()?;
-    let solve_s = t1.elapsed().as_secs_f64();
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    maps.write(out)?;
-    summarise(&maps, solver.candidate_pixels(), read_s, solve_s);
-    println!("wrote {}", out.join("screen_coords.npy").display());
-    if let Some(opts) = surfaces {
-        let cov = maps.screen_cov();
-        let unc = Uncertainty::Cov(&cov);
-        super::surfaces_stage::run(station, &maps.screen_coords(), unc, opts, out)?;
-        println!("wrote {}", out.join("surfaces.json").display());
+/// Writes a reconstruction into `out` and prints what it found; a surface
+/// stage that could not run is the command's error, after the spectral maps
+/// are written. `mfd measure` calls this with its streamed solver's result.
+pub fn write_and_print(rec: &Reconstruction, out: &std::path::Path) -> anyhow::Result<()> {
+    rec.write(out)?;
+    if let Some(s) = &rec.spectral {
+        summarise(&s.maps, s.fitted_pixels, s.read_s, s.solve_s);
+        println!("wrote {}", out.join("screen_coords.npy").display());
     }
-    Ok(())
+    match &rec.surfaces {
+        None => Ok(()),
+        Some(Err(e)) => Err(anyhow::anyhow!("surface stage: {e}")),
+        Some(Ok(stage)) => {
+            super::surfaces_stage::print_summary(stage);
+            println!("wrote {}", out.join("surfaces.json").display());
+            Ok(())
+        }
+    }
 }
 
 /// The surface stage alone, from a screen_coords.npy.
 fn from_screen_coords(
     args: &ReconstructArgs,
-    opts: &mfd::solve::surfaces::SurfaceOptions,
+    surfaces: Option<mfd::solve::surfaces::SurfaceOptions>,
 ) -> anyhow::Result<()> {
     let (Some(coords_path), Some(station_path)) = (&args.screen_coords, &args.station) else {
         anyhow::bail!("give an acquisition folder, or --screen-coords with --station");
     };
     let station = Station::load(station_path)?;
-    let cam = &station.camera;
-    let load = |path: &std::path::Path, k: usize| -> anyhow::Result<Vec<f64>> {
-        let expect = if k == 2 {
-            vec![cam.height as usize, cam.width as usize, 2, 2]
-        } else {
-            vec![cam.height as usize, cam.width as usize, 4, 4]
-        };
-        let (shape, data) = mfd::formats::npy::read_f64(path)?;
-        anyhow::ensure!(
-            shape == expect,
-            "{}: shape {shape:?}, expected {expect:?} (rows, columns, reflection, u/v) for {}",
-            path.display(),
-            station_path.display()
-        );
-        Ok(data)
+    let (points, source) = ScreenPoints::load(coords_path, args.screen_std.as_deref(), &station)?;
+    match source {
+        Some(p) => println!("uncertainty of the screen points from {}", p.display()),
+        None => println!("no screen_std.npy: the residuals set the uncertainty scale"),
+    }
+    let options = Options {
+        surfaces,
+        ..Options::default()
     };
-    let coords = load(coords_path, 2)?;
-    let beside = |name: &str| {
-        let p = coords_path.with_file_name(name);
-        p.exists().then_some(p)
-    };
-    let (unc_path, is_cov) = match &args.screen_std {
-        Some(p) => (Some(p.clone()), false),
-        None => match beside("screen_cov.npy") {
-            Some(p) => (Some(p), true),
-            None => (beside("screen_std.npy"), false),
-        },
-    };
-    let unc_data = match &unc_path {
-        Some(p) => {
-            println!("uncertainty of the screen points from {}", p.display());
-            Some(load(p, if is_cov { 4 } else { 2 })?)
-        }
-        None => {
-            println!("no screen_std.npy: the residuals set the uncertainty scale");
-            None
-        }
-    };
-    let unc = match (&unc_data, is_cov) {
-        (None, _) => Uncertainty::Unknown,
-        (Some(d), true) => Uncertainty::Cov(d),
-        (Some(d), false) => Uncertainty::Std(d),
-    };
-    super::surfaces_stage::run(&station, &coords, unc, opts, &args.out)?;
-    println!("wrote {}", args.out.join("surfaces.json").display());
-    Ok(())
+    let rec = pipeline::reconstruct(
+        Input::ScreenPoints(points),
+        &station,
+        &options,
+        &mut |_, _| {},
+    )?;
+    write_and_print(&rec, &args.out)
 }
 
 fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {

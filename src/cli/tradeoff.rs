@@ -15,11 +15,12 @@ use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
+use mfd::report::metrics::rms_difference_nm;
 use mfd::report::plot::{line_plot_png, Panel, Series};
 use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
 use mfd::solve::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
 use mfd::solve::surfaces::lm::LmOptions;
-use mfd::solve::surfaces::report::{figures, rms_difference_nm};
+use mfd::solve::surfaces::report::figures;
 use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
 
 /// Arguments of `mfd tradeoff`.

@@ -44,7 +44,7 @@ pub(crate) fn open_device(
         unavailable(format!("adapter `{}` gave no device: {e}", info.name))
     })?;
     device.on_uncaptured_error(std::sync::Arc::new(|e| {
-        eprintln!("mfd display: uncaptured GPU error: {e}");
+        log::error!("mfd display: uncaptured GPU error: {e}");
     }));
     Ok((adapter, device, queue))
 }

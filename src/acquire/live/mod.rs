@@ -21,6 +21,7 @@
 //! [`Counters`], and shows nothing new meanwhile. Memory stays bounded by
 //! `capacity` frames per consumer.
 
+mod measurement;
 mod recorder;
 mod sequencer;
 mod sim_display;
@@ -28,6 +29,7 @@ mod sinks;
 
 use std::time::Duration;
 
+pub use measurement::{Measurement, MeasurementError, Start};
 pub use recorder::Recorder;
 pub use sequencer::{acquire, Session};
 pub use sim_display::{MirroredDisplay, SimDisplay};

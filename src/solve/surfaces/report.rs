@@ -2,7 +2,7 @@
 //! their uncertainties, height maps on a grid, and the summary that
 //! `mfd reconstruct` writes as `summary.json`.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::solve::SurfaceSolution;
 use crate::optics::zernike::ZernikeSurface;
@@ -10,8 +10,12 @@ use crate::optics::zernike::ZernikeSurface;
 /// Noll terms 1–3 (piston, tilts) are removed from every figure and picture.
 pub const REMOVED_TERMS: usize = 3;
 
+/// What the figures and pictures leave out, in words (`summary.json`).
+pub const FIGURES_NOTE: &str = "RMS, PV and pictures with piston and tilt (Noll 1-3) removed; \
+     front piston fixed at 0 by the reference plane; back piston fixed at the nominal thickness";
+
 /// One surface's figures.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SurfaceFigures {
     /// Number of Zernike terms.
     pub terms: usize,
@@ -116,15 +120,4 @@ pub fn figures(sol: &SurfaceSolution, back: bool) -> SurfaceFigures {
         coefficients_nm: c.to_vec(),
         std_nm: std.clone(),
     }
-}
-
-/// RMS difference (nm) of two coefficient sets over the unit disk with
-/// piston and tilt removed: the root sum of squared differences from j = 4
-/// (Noll terms are orthonormal in RMS); missing terms count as 0.
-pub fn rms_difference_nm(a: &[f64], b: &[f64]) -> f64 {
-    (REMOVED_TERMS..a.len().max(b.len()))
-        .map(|k| a.get(k).copied().unwrap_or(0.0) - b.get(k).copied().unwrap_or(0.0))
-        .map(|d| d * d)
-        .sum::<f64>()
-        .sqrt()
 }

@@ -14,6 +14,10 @@ use nalgebra::{DMatrix, DVector};
 use super::problem::{Layout, Normal};
 use crate::optics::zernike::terms_up_to_order;
 
+/// The criterion in words, for reports (`summary.json`).
+pub const CRITERION: &str = "BIC = chi2 + p ln N over nested Noll orders (N ln(chi2/N) + p ln N \
+     when sigma is unknown)";
+
 /// The term count chosen for one surface, with the criterion's values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TermChoice {

@@ -259,6 +259,10 @@ pub const OUTLIER_CHI2: f64 = 49.0;
 /// not a few points, is wrong, and the residuals say so (χ²/dof).
 const MAX_OUTLIER_FRACTION: f64 = 0.01;
 
+/// The outlier rule in words, for reports (`summary.json`).
+pub const OUTLIER_RULE: &str = "pixel chi2 of its whitened residuals > 49 x max(1, median chi2 \
+     per component / 0.75), at most 1 % of the pixels";
+
 /// Pixels (indices into `obs.pixels`) whose χ² at the current fit exceeds
 /// [`OUTLIER_CHI2`] times the fit's scale: the median of χ²/(components)
 /// over the pixels divided by its expectation (≈ 0.75 for 2–4 components),

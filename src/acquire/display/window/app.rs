@@ -177,7 +177,7 @@ impl App {
     fn redraw(&mut self) {
         if let (Some(screen), Some((index, pattern))) = (self.screen.as_mut(), self.last) {
             if let Err(e) = screen.show(index, &pattern) {
-                eprintln!("mfd display: redrawing pattern {index}: {e}");
+                log::error!("mfd display: redrawing pattern {index}: {e}");
             }
         }
     }

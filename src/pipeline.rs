@@ -1,0 +1,346 @@
+//! The reconstruction pipeline as one library call: from an acquisition,
+//! a streamed spectral solver, or screen points, through the spectral stage
+//! and the surface solvers, to the files of a result folder.
+//!
+//! ```text
+//! Input::Acquisition ─► spectral solver ─┐
+//! Input::Streamed (frames already in) ───┼─► SpectralMaps ─► surface solvers ─► Reconstruction
+//! Input::ScreenPoints ───────────────────────────────────────┘                   └─► write(DIR)
+//! ```
+//!
+//! `mfd reconstruct`, `mfd measure`, the tests and any server call
+//! [`reconstruct`]; the command line only parses arguments and prints.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::acquire::acquisition::{Acquisition, AcquisitionError};
+use crate::formats::npy::{self, NpyError};
+use crate::formats::surfaces_file::{SurfacesFile, SurfacesFileError};
+use crate::optics::station::Station;
+use crate::report::pictures;
+use crate::report::plot::PlotError;
+use crate::report::summary::Summary;
+use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
+use crate::solve::surfaces::report::height_grid;
+use crate::solve::surfaces::{
+    reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
+    Uncertainty,
+};
+
+/// Side of the height-map grids written beside `surfaces.json`, pixels.
+pub const HEIGHT_GRID: usize = 256;
+
+/// Errors of the pipeline: which stage or file failed, with its cause.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// Reading the acquisition failed.
+    #[error(transparent)]
+    Acquisition(#[from] AcquisitionError),
+    /// The spectral stage failed.
+    #[error(transparent)]
+    Spectral(#[from] SpectralError),
+    /// An NPY array could not be read or written.
+    #[error(transparent)]
+    Npy(#[from] NpyError),
+    /// An array does not fit the station.
+    #[error("{path}: shape {found:?}, expected {expected:?} ({what}) for the station's camera")]
+    Shape {
+        /// The file.
+        path: PathBuf,
+        /// Its shape.
+        found: Vec<usize>,
+        /// The shape the station implies.
+        expected: Vec<usize>,
+        /// What the axes are.
+        what: &'static str,
+    },
+    /// `surfaces.json` could not be written.
+    #[error(transparent)]
+    SurfacesFile(#[from] SurfacesFileError),
+    /// A picture could not be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+    /// A file or folder of the result could not be written.
+    #[error("writing {path}: {source}")]
+    Io {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// `summary.json` could not be serialised.
+    #[error("{path}: {source}")]
+    Json {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: serde_json::Error,
+    },
+}
+
+/// The uncertainty of screen points handed to the surface stage.
+#[derive(Debug, Clone)]
+pub enum PointUncertainty {
+    /// `[rows, cols, 4, 4]`: covariance of u1, v1, u2, v2 per pixel, px².
+    Covariance(Vec<f64>),
+    /// `[rows, cols, 2, 2]`: standard deviations, px.
+    Std(Vec<f64>),
+    /// None known: the residuals set the scale.
+    Unknown,
+}
+
+/// Screen points of every camera pixel, `[rows, cols, 2, 2]` (spec layout),
+/// with their uncertainty.
+#[derive(Debug, Clone)]
+pub struct ScreenPoints {
+    /// u, v of front and back, screen px, NaN where not found.
+    pub coords: Vec<f64>,
+    /// Their uncertainty.
+    pub uncertainty: PointUncertainty,
+}
+
+impl ScreenPoints {
+    /// Reads `screen_coords.npy` at `coords` and its uncertainty: `std`
+    /// (`[rows, cols, 2, 2]`) when given, else `screen_cov.npy` or
+    /// `screen_std.npy` beside it when one exists, else none. Returns the
+    /// file the uncertainty came from.
+    ///
+    /// # Errors
+    /// [`PipelineError::Npy`] for unreadable files, [`PipelineError::Shape`]
+    /// when an array does not fit the station's camera.
+    pub fn load(
+        coords: &Path,
+        std: Option<&Path>,
+        station: &Station,
+    ) -> Result<(ScreenPoints, Option<PathBuf>), PipelineError> {
+        let (rows, cols) = (
+            station.camera.height as usize,
+            station.camera.width as usize,
+        );
+        let read = |path: &Path, k: usize| -> Result<Vec<f64>, PipelineError> {
+            let expected = vec![rows, cols, k, k];
+            let (found, data) = npy::read_f64(path)?;
+            if found != expected {
+                let what = if k == 2 {
+                    "rows, columns, reflection, u/v"
+                } else {
+                    "rows, columns, covariance of u1, v1, u2, v2"
+                };
+                let path = path.to_path_buf();
+                return Err(PipelineError::Shape {
+                    path,
+                    found,
+                    expected,
+                    what,
+                });
+            }
+            Ok(data)
+        };
+        let beside = |name: &str| Some(coords.with_file_name(name)).filter(|p| p.exists());
+        let (source, is_cov) = match std {
+            Some(p) => (Some(p.to_path_buf()), false),
+            None => match beside("screen_cov.npy") {
+                Some(p) => (Some(p), true),
+                None => (beside("screen_std.npy"), false),
+            },
+        };
+        let uncertainty = match &source {
+            None => PointUncertainty::Unknown,
+            Some(p) if is_cov => PointUncertainty::Covariance(read(p, 4)?),
+            Some(p) => PointUncertainty::Std(read(p, 2)?),
+        };
+        let points = ScreenPoints {
+            coords: read(coords, 2)?,
+            uncertainty,
+        };
+        Ok((points, source))
+    }
+}
+
+impl ScreenPoints {
+    /// The uncertainty as the surface stage takes it.
+    fn uncertainty(&self) -> Uncertainty<'_> {
+        match &self.uncertainty {
+            PointUncertainty::Covariance(c) => Uncertainty::Cov(c),
+            PointUncertainty::Std(s) => Uncertainty::Std(s),
+            PointUncertainty::Unknown => Uncertainty::Unknown,
+        }
+    }
+}
+
+/// What a reconstruction starts from.
+pub enum Input<'a> {
+    /// An acquisition folder's frames, read in order.
+    Acquisition(&'a mut Acquisition),
+    /// A spectral solver that has taken every frame (a live measurement's).
+    Streamed(&'a mut SpectralSolver),
+    /// Screen points: only the surface stage runs.
+    ScreenPoints(ScreenPoints),
+}
+
+/// What to run and how.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// The spectral stage's configuration (unused for screen points).
+    pub spectral: SpectralConfig,
+    /// The surface stage's options; `None` stops after the spectral stage.
+    pub surfaces: Option<SurfaceOptions>,
+}
+
+/// The spectral stage's result.
+#[derive(Debug)]
+pub struct SpectralStage {
+    /// Per-pixel screen points, covariance and quality maps.
+    pub maps: SpectralMaps,
+    /// Pixels fitted (those the station predicts to see the element).
+    pub fitted_pixels: usize,
+    /// Seconds spent reading the frames (0 for a streamed solver).
+    pub read_s: f64,
+    /// Seconds of the solve after the last frame.
+    pub solve_s: f64,
+}
+
+/// The surface stage's result.
+#[derive(Debug)]
+pub struct SurfaceStage {
+    /// The surfaces with their covariance.
+    pub solution: SurfaceSolution,
+    /// Its figures (`summary.json`).
+    pub summary: Summary,
+}
+
+/// A reconstruction: whichever stages ran.
+#[derive(Debug)]
+pub struct Reconstruction {
+    /// The spectral stage (absent when starting from screen points).
+    pub spectral: Option<SpectralStage>,
+    /// The surface stage: absent when not asked for, an error when it could
+    /// not run (the spectral maps are still there to be written).
+    pub surfaces: Option<Result<SurfaceStage, SurfaceError>>,
+}
+
+/// Runs the stages `options` asks for on `input`. `progress(done, total)`
+/// is called after each frame read from an acquisition.
+///
+/// A failing surface stage is not an error of this call: it is returned in
+/// [`Reconstruction::surfaces`], so the spectral maps can still be written.
+///
+/// # Errors
+/// [`PipelineError`] when reading the frames or the spectral stage fails.
+pub fn reconstruct(
+    input: Input<'_>,
+    station: &Station,
+    options: &Options,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Reconstruction, PipelineError> {
+    let (spectral, points) = match input {
+        Input::Acquisition(acq) => {
+            let t0 = Instant::now();
+            acq.check_resolution(station.camera.width, station.camera.height)?;
+            let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
+            let total = acq.frames().len();
+            let mut frame = Vec::new();
+            for k in 0..total {
+                let index = acq.frames()[k].index;
+                acq.read_frame(index, &mut frame)?;
+                solver.push_frame(index, &frame)?;
+                progress(k + 1, total);
+            }
+            let stage = spectral_stage(&mut solver, t0.elapsed().as_secs_f64())?;
+            (Some(stage), None)
+        }
+        Input::Streamed(solver) => (Some(spectral_stage(solver, 0.0)?), None),
+        Input::ScreenPoints(points) => (None, Some(points)),
+    };
+    let surfaces = options.surfaces.as_ref().map(|opts| {
+        let t = Instant::now();
+        let obs = match (&spectral, &points) {
+            (Some(s), _) => {
+                let cov = s.maps.screen_cov();
+                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?
+            }
+            (None, Some(p)) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
+            (None, None) => unreachable!("an input yields maps or points"),
+        };
+        let solution = solve_surfaces(&obs, station, opts)?;
+        let summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
+        Ok(SurfaceStage { solution, summary })
+    });
+    Ok(Reconstruction { spectral, surfaces })
+}
+
+fn spectral_stage(
+    solver: &mut SpectralSolver,
+    read_s: f64,
+) -> Result<SpectralStage, PipelineError> {
+    let t = Instant::now();
+    let maps = solver.solve()?;
+    Ok(SpectralStage {
+        maps,
+        fitted_pixels: solver.candidate_pixels(),
+        read_s,
+        solve_s: t.elapsed().as_secs_f64(),
+    })
+}
+
+impl Reconstruction {
+    /// Writes every result that exists into `out` (created if needed): the
+    /// spectral maps (`screen_coords.npy` and the quality maps), and for a
+    /// surface solution `surfaces.json`, `{front,back}_height_nm.npy`, the
+    /// pictures and `summary.json`. Returns the files written.
+    ///
+    /// # Errors
+    /// [`PipelineError`] naming the file that could not be written.
+    pub fn write(&self, out: &Path) -> Result<Vec<PathBuf>, PipelineError> {
+        std::fs::create_dir_all(out).map_err(|source| PipelineError::Io {
+            path: out.to_path_buf(),
+            source,
+        })?;
+        let mut written = Vec::new();
+        if let Some(s) = &self.spectral {
+            s.maps.write(out)?;
+            written.push(out.join("screen_coords.npy"));
+        }
+        if let Some(Ok(stage)) = &self.surfaces {
+            written.extend(write_surfaces(out, stage)?);
+        }
+        Ok(written)
+    }
+}
+
+/// The surface stage's files in `out`.
+fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, PipelineError> {
+    let (sol, summary) = (&stage.solution, &stage.summary);
+    let mut file = SurfacesFile::from_surfaces(&sol.front, &sol.back);
+    if !sol.back_fitted {
+        file.back = None; // spec: a surface that was not reconstructed is null
+    }
+    let mut written = vec![out.join("surfaces.json")];
+    file.save(&written[0])?;
+    let mut surfaces = vec![("front", &sol.front, &summary.front)];
+    if let Some(back) = &summary.back {
+        surfaces.push(("back", &sol.back, back));
+    }
+    for (name, surface, figures) in surfaces {
+        let grid = height_grid(surface, HEIGHT_GRID);
+        let path = out.join(format!("{name}_height_nm.npy"));
+        npy::write_f64(&path, &[HEIGHT_GRID, HEIGHT_GRID], &grid)?;
+        written.push(path);
+        written.push(pictures::surface(out, name, &grid, HEIGHT_GRID, figures)?);
+        written.extend(pictures::coefficients(out, name, figures)?);
+    }
+    let path = out.join("summary.json");
+    let text = serde_json::to_string_pretty(summary).map_err(|source| PipelineError::Json {
+        path: path.clone(),
+        source,
+    })?;
+    std::fs::write(&path, text + "\n").map_err(|source| PipelineError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    written.push(path);
+    Ok(written)
+}

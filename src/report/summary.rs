@@ -1,0 +1,249 @@
+//! `summary.json` (`mfd-summary/1`): the figures of a surface solution for
+//! scripts and for the operator's report — pixels used, outliers, both
+//! surfaces' figures and coefficients with σ, the term choice, every stage's
+//! iterations and χ², the fit's χ²/dof and condition number. Every sentence
+//! in it comes from the library constant of the rule it describes.
+
+use serde::{Deserialize, Serialize};
+
+use crate::solve::surfaces::report::{figures, SurfaceFigures, FIGURES_NOTE};
+use crate::solve::surfaces::select::{TermChoice, CRITERION};
+use crate::solve::surfaces::solve::{Stage, OUTLIER_RULE};
+use crate::solve::surfaces::{Observations, SurfaceSolution};
+
+/// The `format` value of a summary.
+pub const SUMMARY_FORMAT: &str = "mfd-summary/1";
+
+/// Outliers kept in the summary's list, at most (the count is exact).
+const LISTED_OUTLIERS: usize = 1000;
+
+/// The figures of one surface reconstruction (`summary.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Summary {
+    /// Always [`SUMMARY_FORMAT`].
+    pub format: String,
+    /// Pixels with a measured S1 and S2.
+    pub pixels: PixelCounts,
+    /// Whether the screen points' σ came from the data (the spectral stage)
+    /// rather than from the residuals.
+    pub sigma_from_data: bool,
+    /// Pixels left out as outliers.
+    pub outliers: Outliers,
+    /// What the figures leave out ([`FIGURES_NOTE`]).
+    pub figures_note: String,
+    /// The front's figures.
+    pub front: SurfaceFigures,
+    /// The back's figures; `null` when it was not reconstructed.
+    pub back: Option<SurfaceFigures>,
+    /// How the number of Zernike terms was chosen.
+    pub terms: Terms,
+    /// Every stage that ran, in order.
+    pub stages: Vec<StageSummary>,
+    /// Final χ² of the joint fit.
+    pub chi2: f64,
+    /// Residual components of the final fit.
+    pub residuals: usize,
+    /// χ²/(N − p).
+    pub reduced_chi2: f64,
+    /// Factor applied to (JᵀJ)⁻¹ for the covariance.
+    pub covariance_scale: f64,
+    /// Condition number of the weighted Jacobian.
+    #[serde(with = "nullable")]
+    pub condition_number: f64,
+    /// Wall time of the surface stage, s.
+    pub seconds: f64,
+}
+
+/// Pixels that entered the surface stage.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+pub struct PixelCounts {
+    /// With a front point S1.
+    pub s1: usize,
+    /// With a back point S2.
+    pub s2: usize,
+}
+
+/// The outlier rule and what it left out.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Outliers {
+    /// The rule in words ([`OUTLIER_RULE`]).
+    pub rule: String,
+    /// Pixels left out.
+    pub count: usize,
+    /// The first of them as `[column, row]` (at most 1000).
+    pub pixels_col_row: Vec<[u32; 2]>,
+}
+
+/// The term choice: the criterion, and per surface the chosen count with
+/// every candidate's value (absent when the caller fixed the count).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Terms {
+    /// The criterion in words ([`CRITERION`]), or that the count was fixed.
+    pub criterion: String,
+    /// The front's choice.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub front: Option<Choice>,
+    /// The back's choice.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub back: Option<Choice>,
+}
+
+/// One surface's term choice.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Choice {
+    /// Chosen number of terms.
+    pub terms: usize,
+    /// `[terms, BIC]` of every candidate.
+    pub candidates: Vec<(usize, f64)>,
+}
+
+/// One stage of the surface solvers.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StageSummary {
+    /// The stage's name ("front slopes", "back", "joint", ...).
+    pub name: String,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// The stage's own figures, beside `name` and `seconds` in the JSON.
+    #[serde(flatten)]
+    pub detail: StageDetail,
+}
+
+/// A stage's own figures: which kind of stage it was decides the fields.
+/// (Untagged: the JSON has the fields side by side with `name`, as readers
+/// of `mfd-summary/1` expect.)
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum StageDetail {
+    /// The front's slope iteration.
+    Slopes(SlopeStage),
+    /// A Levenberg–Marquardt stage.
+    LeastSquares(LeastSquaresStage),
+    /// A stage that reports its time only.
+    Timed {},
+}
+
+/// Figures of the front's slope iteration.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SlopeStage {
+    /// Slope fits run.
+    pub iterations: usize,
+    /// RMS change of the coefficients in the last iteration, nm.
+    pub last_change_nm: f64,
+    /// Condition number of the last slope fit.
+    #[serde(with = "nullable")]
+    pub condition_number: f64,
+    /// Pixels whose slopes entered.
+    pub points: usize,
+}
+
+/// Figures of a Levenberg–Marquardt stage.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LeastSquaresStage {
+    /// Normal-equation builds.
+    pub iterations: usize,
+    /// χ² at the start.
+    pub chi2_start: f64,
+    /// χ² at the end.
+    pub chi2: f64,
+    /// Residual components at the end.
+    pub residuals: usize,
+    /// Whether the step tolerance was reached.
+    pub converged: bool,
+    /// Why it stopped, in words.
+    pub reason: String,
+    /// Measured paths the final surfaces could not trace (front, back).
+    pub paths_lost: [usize; 2],
+}
+
+impl Summary {
+    /// The summary of `sol`, solved from `obs` in `seconds`.
+    pub fn new(obs: &Observations, sol: &SurfaceSolution, seconds: f64) -> Summary {
+        Summary {
+            format: SUMMARY_FORMAT.into(),
+            pixels: PixelCounts {
+                s1: obs.count(0),
+                s2: obs.count(1),
+            },
+            sigma_from_data: obs.sigma_known,
+            outliers: Outliers {
+                rule: OUTLIER_RULE.into(),
+                count: sol.rejected.len(),
+                pixels_col_row: sol.rejected.iter().take(LISTED_OUTLIERS).copied().collect(),
+            },
+            figures_note: FIGURES_NOTE.into(),
+            front: figures(sol, false),
+            back: sol.back_fitted.then(|| figures(sol, true)),
+            terms: terms(sol.choice.as_ref()),
+            stages: sol.stages.iter().map(stage).collect(),
+            chi2: sol.chi2,
+            residuals: sol.n_resid,
+            reduced_chi2: sol.reduced_chi2,
+            covariance_scale: sol.covariance_scale,
+            condition_number: sol.condition_number,
+            seconds,
+        }
+    }
+}
+
+fn terms(choice: Option<&[TermChoice; 2]>) -> Terms {
+    let one = |c: &TermChoice| Choice {
+        terms: c.terms,
+        candidates: c.candidates.clone(),
+    };
+    match choice {
+        Some([f, b]) => Terms {
+            criterion: CRITERION.into(),
+            front: Some(one(f)),
+            back: Some(one(b)),
+        },
+        None => Terms {
+            criterion: "fixed by --terms".into(),
+            front: None,
+            back: None,
+        },
+    }
+}
+
+fn stage(s: &Stage) -> StageSummary {
+    StageSummary {
+        name: s.name.into(),
+        seconds: s.seconds,
+        detail: match (&s.front, &s.lm) {
+            (Some(f), _) => StageDetail::Slopes(SlopeStage {
+                iterations: f.iterations,
+                last_change_nm: f.last_change_nm,
+                condition_number: f.condition_number,
+                points: f.points,
+            }),
+            (None, Some(l)) => StageDetail::LeastSquares(LeastSquaresStage {
+                iterations: l.iterations,
+                chi2_start: l.chi2_start,
+                chi2: l.chi2,
+                residuals: l.n_resid,
+                converged: l.converged,
+                reason: l.reason.clone(),
+                paths_lost: l.failed,
+            }),
+            (None, None) => StageDetail::Timed {},
+        },
+    }
+}
+
+/// A float that JSON writes as `null` when it is not finite (a condition
+/// number of a singular system) and reads back as NaN.
+mod nullable {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(x: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if x.is_finite() {
+            s.serialize_f64(*x)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+}
