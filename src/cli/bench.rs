@@ -129,52 +129,9 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     };
     let mut cam = SimCamera::new(&view, &station.screen, params)?;
     let n_pix = station.camera.pixel_count();
-    // The ingest alone, with no frames being rendered beside it, before the
-    // run (so that its memory is not counted twice): a solver takes 32
-    // frames untimed (its memory is touched for the first time), then 192
-    // timed, on both cores.
-    let quiet_ms = {
-        let mut probe = SpectralSolver::new(&station, &frames, config.clone())?;
-        let mut frame = vec![0u16; n_pix];
-        cam.render(&patterns[0], 0, &mut frame);
-        for k in 0..32 {
-            probe.push_frame(k, &frame)?;
-        }
-        let t = Instant::now();
-        for k in 32..224 {
-            probe.push_frame(k, &frame)?;
-        }
-        t.elapsed().as_secs_f64() * 1e3 / 192.0
-    };
+    let quiet_ms = quiet_ingest_ms(&station, &frames, &config, &mut cam, &patterns[0])?;
     let mut solver = SpectralSolver::new(&station, &frames, config)?;
-    // The camera side: a thread renders frames into a bounded ring buffer.
-    let (tx, rx) = crossbeam_channel::bounded::<(usize, Vec<u16>)>(8);
-    let producer = std::thread::spawn(move || {
-        for (k, p) in patterns.iter().enumerate() {
-            let mut frame = vec![0u16; n_pix];
-            cam.render(p, k as u64, &mut frame);
-            if tx.send((k, frame)).is_err() {
-                break;
-            }
-        }
-    });
-    let t0 = Instant::now();
-    // Time inside the solver (both cores) while frames stream in: what it
-    // leaves of the camera's frame period.
-    let mut busy_s = 0.0;
-    // The last frame's arrival: the latency runs from there (its push
-    // ingests the last block and seals the statistics).
-    let mut last_arrival = Instant::now();
-    for (k, frame) in rx.iter() {
-        let t = Instant::now();
-        last_arrival = t;
-        solver.push_frame(k, &frame)?;
-        busy_s += t.elapsed().as_secs_f64();
-    }
-    let ingest_s = t0.elapsed().as_secs_f64();
-    producer
-        .join()
-        .map_err(|_| anyhow::anyhow!("the frame producer panicked"))?;
+    let (ingest_s, busy_s, last_arrival) = stream(cam, patterns, &mut solver)?;
     let maps = solver.solve()?;
     let solve_s = last_arrival.elapsed().as_secs_f64();
     let fitted = solver.candidate_pixels();
@@ -206,6 +163,69 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
         "warm_starts": !args.search_every_pixel,
     }));
     Ok(())
+}
+
+/// The solver's ingest alone, ms per frame, with no frames rendered beside
+/// it and before the run (so that its memory is not counted twice): a solver
+/// takes 32 frames untimed (its memory is touched for the first time), then
+/// 192 timed, on both cores.
+fn quiet_ingest_ms(
+    station: &Station,
+    frames: &[mfd::acquire::acquisition::FrameInfo],
+    config: &mfd::solve::spectral::SpectralConfig,
+    cam: &mut SimCamera,
+    pattern: &mfd::acquire::patterns::Pattern,
+) -> anyhow::Result<f64> {
+    let mut probe = mfd::solve::spectral::SpectralSolver::new(station, frames, config.clone())?;
+    let mut frame = vec![0u16; station.camera.pixel_count()];
+    cam.render(pattern, 0, &mut frame);
+    for k in 0..32 {
+        probe.push_frame(k, &frame)?;
+    }
+    let t = Instant::now();
+    for k in 32..224 {
+        probe.push_frame(k, &frame)?;
+    }
+    Ok(t.elapsed().as_secs_f64() * 1e3 / 192.0)
+}
+
+/// Streams the schedule into `solver` as a camera would: a thread renders
+/// frames into a bounded ring buffer of 8. Returns the seconds from the
+/// first frame to the last, the seconds spent inside the solver (what it
+/// leaves of the camera's frame period), and the last frame's arrival, from
+/// which the latency runs (its push ingests the last block and seals the
+/// statistics).
+fn stream(
+    mut cam: SimCamera,
+    patterns: Vec<mfd::acquire::patterns::Pattern>,
+    solver: &mut mfd::solve::spectral::SpectralSolver,
+) -> anyhow::Result<(f64, f64, Instant)> {
+    let (w, h) = cam.resolution();
+    let n_pix = w * h;
+    let (tx, rx) = crossbeam_channel::bounded::<(usize, Vec<u16>)>(8);
+    let producer = std::thread::spawn(move || {
+        for (k, p) in patterns.iter().enumerate() {
+            let mut frame = vec![0u16; n_pix];
+            cam.render(p, k as u64, &mut frame);
+            if tx.send((k, frame)).is_err() {
+                break;
+            }
+        }
+    });
+    let t0 = Instant::now();
+    let mut busy_s = 0.0;
+    let mut last_arrival = Instant::now();
+    for (k, frame) in rx.iter() {
+        let t = Instant::now();
+        last_arrival = t;
+        solver.push_frame(k, &frame)?;
+        busy_s += t.elapsed().as_secs_f64();
+    }
+    let ingest_s = t0.elapsed().as_secs_f64();
+    producer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the frame producer panicked"))?;
+    Ok((ingest_s, busy_s, last_arrival))
 }
 
 fn random_surfaces(station: &Station) -> anyhow::Result<(ZernikeSurface, ZernikeSurface)> {

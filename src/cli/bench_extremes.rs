@@ -29,6 +29,9 @@ pub struct ExtremesArgs {
     /// Print a markdown table instead of one JSON line per case.
     #[arg(long)]
     markdown: bool,
+    /// Only these cases (by name, comma-separated); default: all.
+    #[arg(long, value_delimiter = ',')]
+    case: Vec<String>,
 }
 
 /// One case's figures.
@@ -146,7 +149,18 @@ pub fn run(args: &ExtremesArgs) -> anyhow::Result<()> {
         );
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
     }
-    for c in &CASES {
+    if let Some(unknown) = args
+        .case
+        .iter()
+        .find(|n| !CASES.iter().any(|c| c.name == *n))
+    {
+        let names: Vec<&str> = CASES.iter().map(|c| c.name).collect();
+        anyhow::bail!("--case {unknown:?}: expected one of {names:?}");
+    }
+    let chosen = CASES
+        .iter()
+        .filter(|c| args.case.is_empty() || args.case.iter().any(|n| n == c.name));
+    for c in chosen {
         let station = mfd::optics::station::bench_station(c.thickness_mm, c.index, c.tilt_deg)?;
         let outcome = one(&station, c, args);
         if args.markdown {
