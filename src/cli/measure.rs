@@ -21,8 +21,6 @@ use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::pipeline::{self, Input, Options};
 use mfd::sim::{SimCamera, SimParams};
 
-use super::simulate::ScheduleArgs;
-
 /// Arguments of `mfd measure`.
 #[derive(Args, Clone)]
 pub struct MeasureArgs {
@@ -41,7 +39,7 @@ pub struct MeasureArgs {
     #[arg(long)]
     out: PathBuf,
     #[command(flatten)]
-    schedule: ScheduleArgs,
+    schedule: super::ScheduleArgs,
     /// Simulated cameras: the element's true surfaces (mfd-surfaces/1); flat when omitted.
     #[arg(long)]
     sim_surfaces: Option<PathBuf>,
@@ -404,5 +402,5 @@ fn finish(
     if let Some(s) = rec.spectral.as_mut() {
         s.read_s = acquire_s;
     }
-    super::reconstruct::write_and_print(&rec, &args.out.join("result"))
+    super::output::write_and_print(&rec, &args.out.join("result"))
 }

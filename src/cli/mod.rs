@@ -1,12 +1,10 @@
 //! Subcommands of the `mfd` binary.
 
 pub mod bench;
-pub mod bench_extremes;
-pub mod bench_surfaces;
-pub mod bench_table;
 pub mod compare;
 pub mod display;
 pub mod measure;
+pub mod output;
 pub mod reconstruct;
 pub mod simulate;
 pub mod station;
@@ -90,5 +88,38 @@ pub fn parse_engine(name: &str) -> anyhow::Result<mfd::solve::spectral::Engine> 
         "series" => Ok(Engine::Series),
         "statistics" | "stats" => Ok(Engine::Statistics),
         other => anyhow::bail!("--engine: expected auto, series or statistics, found {other:?}"),
+    }
+}
+
+/// The pattern schedule flags, shared by every command that shows patterns.
+#[derive(clap::Args, Clone)]
+pub struct ScheduleArgs {
+    /// Fringe directions, degrees, comma-separated (±45 diagonals, 0, 90).
+    #[arg(long, value_delimiter = ',', default_values_t = [45.0, -45.0], allow_hyphen_values = true)]
+    pub directions: Vec<f64>,
+    /// First τ (fringe periods across the screen).
+    #[arg(long, default_value_t = 0.2)]
+    pub tau_start: f64,
+    /// Last τ.
+    #[arg(long, default_value_t = 200.0)]
+    pub tau_stop: f64,
+    /// τ step.
+    #[arg(long, default_value_t = 0.2)]
+    pub tau_step: f64,
+    /// Phase shifts shown at every τ, radians, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [0.0], allow_hyphen_values = true)]
+    pub phases: Vec<f64>,
+}
+
+impl ScheduleArgs {
+    /// The schedule these flags describe.
+    pub fn schedule(&self) -> mfd::acquire::patterns::Schedule {
+        mfd::acquire::patterns::Schedule {
+            directions_deg: self.directions.clone(),
+            tau_start: self.tau_start,
+            tau_stop: self.tau_stop,
+            tau_step: self.tau_step,
+            phases_rad: self.phases.clone(),
+        }
     }
 }

@@ -9,8 +9,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfd::acquire::acquisition::Acquisition;
 use mfd::optics::station::Station;
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
-use mfd::pipeline::{self, Input, Options, Reconstruction, ScreenPoints};
-use mfd::solve::spectral::{flags, SpectralConfig, SpectralMaps};
+use mfd::pipeline::{self, Input, Options, ScreenPoints};
+use mfd::solve::spectral::SpectralConfig;
 
 /// Arguments of `mfd reconstruct`.
 #[derive(Args)]
@@ -111,27 +111,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         &mut |done, _| bar.set_position(done as u64),
     );
     bar.finish_and_clear();
-    write_and_print(&result?, &args.out)
-}
-
-/// Writes a reconstruction into `out` and prints what it found; a surface
-/// stage that could not run is the command's error, after the spectral maps
-/// are written. `mfd measure` calls this with its streamed solver's result.
-pub fn write_and_print(rec: &Reconstruction, out: &std::path::Path) -> anyhow::Result<()> {
-    rec.write(out)?;
-    if let Some(s) = &rec.spectral {
-        summarise(&s.maps, s.fitted_pixels, s.read_s, s.solve_s);
-        println!("wrote {}", out.join("screen_coords.npy").display());
-    }
-    match &rec.surfaces {
-        None => Ok(()),
-        Some(Err(e)) => Err(anyhow::anyhow!("surface stage: {e}")),
-        Some(Ok(stage)) => {
-            super::surfaces_stage::print_summary(stage);
-            println!("wrote {}", out.join("surfaces.json").display());
-            Ok(())
-        }
-    }
+    super::output::write_and_print(&result?, &args.out)
 }
 
 /// The surface stage alone, from a screen_coords.npy.
@@ -158,66 +138,5 @@ fn from_screen_coords(
         &options,
         &mut |_, _| {},
     )?;
-    write_and_print(&rec, &args.out)
-}
-
-fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {
-    let both = maps.found_both();
-    let median = |k: usize| {
-        let mut v: Vec<f64> = maps
-            .pixels
-            .iter()
-            .map(|p| p.std[k][0].hypot(p.std[k][1]))
-            .filter(|s| s.is_finite())
-            .collect();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-    };
-    println!(
-        "spectral: {fitted} pixels fitted in {solve_s:.1} s (frames read in {read_s:.1} s); \
-         both reflections found in {both}; median σ(S1) {:.4} px, σ(S2) {:.4} px",
-        median(0),
-        median(1)
-    );
-    let names = [
-        (flags::NO_SIGNAL, "no fringe signal"),
-        (flags::SATURATED, "saturated samples excluded"),
-        (flags::ONE_REFLECTION, "one reflection"),
-        (flags::THREE_REFLECTIONS, "three reflections"),
-        (flags::UNRESOLVED, "reflections not separable"),
-        (flags::OFFSET_MISMATCH, "offset disagrees with geometry"),
-        (flags::NOT_CONVERGED, "not converged"),
-        (flags::NEGATIVE_AMPLITUDE, "negative amplitude"),
-    ];
-    for (bit, name) in names {
-        let n = maps
-            .pixels
-            .iter()
-            .filter(|p| p.flags & bit != 0 && p.flags & flags::NO_DATA == 0)
-            .count();
-        if n > 0 {
-            println!("  {n} pixels: {name}");
-        }
-    }
-    let count = |f: &dyn Fn(u16) -> bool| {
-        maps.pixels
-            .iter()
-            .filter(|p| p.flags & flags::NO_DATA == 0 && f(p.flags))
-            .count()
-    };
-    let left = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL == 0);
-    if left > 0 {
-        println!("  {left} pixels: signal or fit outside the statistics engine's band");
-    }
-    let quiet = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL != 0);
-    if quiet + left > fitted / 2 {
-        println!(
-            "  most pixels show no signal within the band the statistics engine keeps: the \
-             element may sit away from where the station file puts it; rerun with \
-             --band-bins 8 or --engine series"
-        );
-    }
-    if let Some(s) = maps.saturation_counts {
-        println!("  saturation level {s} counts");
-    }
+    super::output::write_and_print(&rec, &args.out)
 }

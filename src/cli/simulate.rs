@@ -6,45 +6,11 @@ use anyhow::Context;
 use clap::Args;
 
 use mfd::acquire::acquisition::FrameLayout;
-use mfd::acquire::patterns::Schedule;
 use mfd::formats::surfaces_file::SurfacesFile;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{simulate, RandomSurfaceSpec, SimParams, Simulation};
-
-/// The pattern schedule flags, shared by every command that shows patterns.
-#[derive(Args, Clone)]
-pub struct ScheduleArgs {
-    /// Fringe directions, degrees, comma-separated (±45 diagonals, 0, 90).
-    #[arg(long, value_delimiter = ',', default_values_t = [45.0, -45.0], allow_hyphen_values = true)]
-    pub directions: Vec<f64>,
-    /// First τ (fringe periods across the screen).
-    #[arg(long, default_value_t = 0.2)]
-    pub tau_start: f64,
-    /// Last τ.
-    #[arg(long, default_value_t = 200.0)]
-    pub tau_stop: f64,
-    /// τ step.
-    #[arg(long, default_value_t = 0.2)]
-    pub tau_step: f64,
-    /// Phase shifts shown at every τ, radians, comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = [0.0], allow_hyphen_values = true)]
-    pub phases: Vec<f64>,
-}
-
-impl ScheduleArgs {
-    /// The schedule these flags describe.
-    pub fn schedule(&self) -> Schedule {
-        Schedule {
-            directions_deg: self.directions.clone(),
-            tau_start: self.tau_start,
-            tau_stop: self.tau_stop,
-            tau_step: self.tau_step,
-            phases_rad: self.phases.clone(),
-        }
-    }
-}
 
 /// Arguments of `mfd simulate`.
 #[derive(Args)]
@@ -63,7 +29,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     out: PathBuf,
     #[command(flatten)]
-    schedule: ScheduleArgs,
+    schedule: super::ScheduleArgs,
     /// Read noise, standard deviation as a fraction of full scale (0 = exact).
     #[arg(long, default_value_t = 0.0)]
     noise: f64,

@@ -3,7 +3,6 @@
 
 use clap::Args;
 
-use mfd::pipeline::SurfaceStage;
 use mfd::solve::surfaces::lm::LmOptions;
 use mfd::solve::surfaces::SurfaceOptions;
 
@@ -50,50 +49,5 @@ impl SurfaceArgs {
             edge_margin_mm,
             ..SurfaceOptions::default()
         })
-    }
-}
-
-/// Prints a surface solution's figures: per surface its terms, RMS ± σ, PV
-/// and uncertainty; the stages' iterations and times; χ²/dof; outliers.
-pub fn print_summary(stage: &SurfaceStage) {
-    let (sol, summary) = (&stage.solution, &stage.summary);
-    let seconds = summary.seconds;
-    if summary.back.is_none() {
-        println!("back: not reconstructed (no back reflection was measured)");
-    }
-    let surfaces = [
-        ("front", Some(&summary.front)),
-        ("back", summary.back.as_ref()),
-    ];
-    for (name, f) in surfaces.into_iter().filter_map(|(n, f)| Some((n, f?))) {
-        println!(
-            "{name}: {} terms, RMS {:.2} ± {:.2} nm, PV {:.1} nm (piston and tilt removed); \
-             surface uncertainty {:.2} nm RMS",
-            f.terms, f.rms_nm, f.rms_std_nm, f.pv_nm, f.error_rms_nm
-        );
-    }
-    let iters: Vec<String> = sol
-        .stages
-        .iter()
-        .map(|s| {
-            let n = s.lm.as_ref().map_or_else(
-                || s.front.as_ref().map_or(0, |f| f.iterations),
-                |l| l.iterations,
-            );
-            format!("{} {} it {:.2} s", s.name, n, s.seconds)
-        })
-        .collect();
-    println!(
-        "surfaces: {seconds:.2} s ({}); χ²/dof {:.3}, condition number {:.3e}",
-        iters.join(", "),
-        sol.reduced_chi2,
-        sol.condition_number
-    );
-    if !sol.rejected.is_empty() {
-        println!(
-            "  {} pixels left out as outliers (χ² > 49), e.g. (column, row) {:?}",
-            sol.rejected.len(),
-            &sol.rejected[..sol.rejected.len().min(5)]
-        );
     }
 }

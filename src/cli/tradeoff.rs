@@ -67,7 +67,7 @@ struct Row {
 pub fn run(args: &TradeoffArgs) -> anyhow::Result<()> {
     let station = match &args.station {
         Some(p) => Station::load(p)?,
-        None => super::bench_table::small_station(10.0, 1.5)?,
+        None => mfd::optics::station::bench_station(10.0, 1.5, 15.0)?,
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;

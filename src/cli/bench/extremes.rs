@@ -87,7 +87,7 @@ impl Outcome {
             "noisy_error_over_bound": ratio,
             "noisy_bound_nm": bound,
             "noisy_stopped": stopped,
-            "seconds": super::bench::round(self.seconds, 3),
+            "seconds": super::round(self.seconds, 3),
             "converged": self.converged,
             "condition_number": self.condition_number,
         })
@@ -194,7 +194,7 @@ pub fn run(args: &ExtremesArgs) -> anyhow::Result<()> {
             }
             Err(e) => figures["stopped"] = crate::error_chain(e).into(),
         }
-        super::bench::print_json(&figures);
+        super::print_json(&figures);
     }
     Ok(())
 }

@@ -1,5 +1,9 @@
 //! `mfd bench`: benchmarks that print machine-readable figures.
 
+mod extremes;
+mod surfaces;
+mod thickness;
+
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -36,16 +40,16 @@ enum BenchKind {
     Spectral(SpectralBenchArgs),
     /// Spectral error against the Cramér–Rao bound over plate thickness and
     /// refractive index (simulated 48×48 station, paper schedule): a markdown table.
-    Thickness(super::bench_table::TableArgs),
+    Thickness(thickness::TableArgs),
     /// Surface solvers on the full-resolution station from traced screen
     /// points with noise at the spectral solver's level; prints one JSON
     /// line: front_s, back_s, back_iterations, joint_s, front_rms_err_nm,
     /// back_rms_err_nm, the bounds, and more.
-    Surfaces(super::bench_surfaces::SurfaceBenchArgs),
+    Surfaces(surfaces::SurfaceBenchArgs),
     /// Surface solvers at the extremes (thickness 1–40 mm, n 1.4–2.4,
     /// incidence 5–35°, 15–231 terms, a back 10 µm out of flat) on the 48×48
     /// station: a markdown table of errors, iterations and outcomes.
-    Extremes(super::bench_extremes::ExtremesArgs),
+    Extremes(extremes::ExtremesArgs),
 }
 
 #[derive(Args)]
@@ -87,9 +91,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     match &args.kind {
         BenchKind::Render(a) => render(a),
         BenchKind::Spectral(a) => spectral(a),
-        BenchKind::Thickness(a) => super::bench_table::run(a),
-        BenchKind::Surfaces(a) => super::bench_surfaces::run(a),
-        BenchKind::Extremes(a) => super::bench_extremes::run(a),
+        BenchKind::Thickness(a) => thickness::run(a),
+        BenchKind::Surfaces(a) => surfaces::run(a),
+        BenchKind::Extremes(a) => extremes::run(a),
     }
 }
 
@@ -118,7 +122,7 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     });
     let config = SpectralConfig {
         roi,
-        engine: super::parse_engine(&args.engine)?,
+        engine: crate::cli::parse_engine(&args.engine)?,
         warm_starts: !args.search_every_pixel,
         ..SpectralConfig::default()
     };

@@ -101,7 +101,7 @@ pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
         })
     };
     let (ff, fb) = (figures(&sol, false), figures(&sol, true));
-    use super::bench::{print_json, round};
+    use super::{print_json, round};
     print_json(&serde_json::json!({
         "bench": "surfaces",
         "station": args.station.display().to_string(),

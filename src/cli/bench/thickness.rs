@@ -49,7 +49,7 @@ pub fn run(args: &TableArgs) -> anyhow::Result<()> {
     );
         println!("|---|---|---|---|---|---|---|---|---|");
     }
-    let engine = super::parse_engine(&args.engine)?;
+    let engine = crate::cli::parse_engine(&args.engine)?;
     for &n in &args.index {
         for &t in &args.thickness_mm {
             row(t, n, args.noise, engine, args.markdown)?;
@@ -135,7 +135,7 @@ fn row(
             ratio(1),
         );
     } else {
-        use super::bench::{print_json, round};
+        use super::{print_json, round};
         print_json(&serde_json::json!({
             "bench": "thickness",
             "thickness_mm": t,

@@ -1,0 +1,133 @@
+//! What `mfd reconstruct` and `mfd measure` print and write at the end: the
+//! result folder, the spectral stage's counts, the surfaces' figures.
+
+use std::path::Path;
+
+use mfd::pipeline::{Reconstruction, SurfaceStage};
+use mfd::solve::spectral::{flags, SpectralMaps};
+
+/// Writes a reconstruction into `out` and prints what it found; a surface
+/// stage that could not run is the command's error, after the spectral maps
+/// are written. `mfd measure` calls this with its streamed solver's result.
+pub fn write_and_print(rec: &Reconstruction, out: &Path) -> anyhow::Result<()> {
+    rec.write(out)?;
+    if let Some(s) = &rec.spectral {
+        summarise(&s.maps, s.fitted_pixels, s.read_s, s.solve_s);
+        println!("wrote {}", out.join("screen_coords.npy").display());
+    }
+    match &rec.surfaces {
+        None => Ok(()),
+        Some(Err(e)) => Err(anyhow::anyhow!("surface stage: {e}")),
+        Some(Ok(stage)) => {
+            print_surfaces(stage);
+            println!("wrote {}", out.join("surfaces.json").display());
+            Ok(())
+        }
+    }
+}
+
+fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {
+    let both = maps.found_both();
+    let median = |k: usize| {
+        let mut v: Vec<f64> = maps
+            .pixels
+            .iter()
+            .map(|p| p.std[k][0].hypot(p.std[k][1]))
+            .filter(|s| s.is_finite())
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    println!(
+        "spectral: {fitted} pixels fitted in {solve_s:.1} s (frames read in {read_s:.1} s); \
+         both reflections found in {both}; median σ(S1) {:.4} px, σ(S2) {:.4} px",
+        median(0),
+        median(1)
+    );
+    let names = [
+        (flags::NO_SIGNAL, "no fringe signal"),
+        (flags::SATURATED, "saturated samples excluded"),
+        (flags::ONE_REFLECTION, "one reflection"),
+        (flags::THREE_REFLECTIONS, "three reflections"),
+        (flags::UNRESOLVED, "reflections not separable"),
+        (flags::OFFSET_MISMATCH, "offset disagrees with geometry"),
+        (flags::NOT_CONVERGED, "not converged"),
+        (flags::NEGATIVE_AMPLITUDE, "negative amplitude"),
+    ];
+    for (bit, name) in names {
+        let n = maps
+            .pixels
+            .iter()
+            .filter(|p| p.flags & bit != 0 && p.flags & flags::NO_DATA == 0)
+            .count();
+        if n > 0 {
+            println!("  {n} pixels: {name}");
+        }
+    }
+    let count = |f: &dyn Fn(u16) -> bool| {
+        maps.pixels
+            .iter()
+            .filter(|p| p.flags & flags::NO_DATA == 0 && f(p.flags))
+            .count()
+    };
+    let left = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL == 0);
+    if left > 0 {
+        println!("  {left} pixels: signal or fit outside the statistics engine's band");
+    }
+    let quiet = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL != 0);
+    if quiet + left > fitted / 2 {
+        println!(
+            "  most pixels show no signal within the band the statistics engine keeps: the \
+             element may sit away from where the station file puts it; rerun with \
+             --band-bins 8 or --engine series"
+        );
+    }
+    if let Some(s) = maps.saturation_counts {
+        println!("  saturation level {s} counts");
+    }
+}
+
+/// Prints a surface solution's figures: per surface its terms, RMS ± σ, PV
+/// and uncertainty; the stages' iterations and times; χ²/dof; outliers.
+fn print_surfaces(stage: &SurfaceStage) {
+    let (sol, summary) = (&stage.solution, &stage.summary);
+    let seconds = summary.seconds;
+    if summary.back.is_none() {
+        println!("back: not reconstructed (no back reflection was measured)");
+    }
+    let surfaces = [
+        ("front", Some(&summary.front)),
+        ("back", summary.back.as_ref()),
+    ];
+    for (name, f) in surfaces.into_iter().filter_map(|(n, f)| Some((n, f?))) {
+        println!(
+            "{name}: {} terms, RMS {:.2} ± {:.2} nm, PV {:.1} nm (piston and tilt removed); \
+             surface uncertainty {:.2} nm RMS",
+            f.terms, f.rms_nm, f.rms_std_nm, f.pv_nm, f.error_rms_nm
+        );
+    }
+    let iters: Vec<String> = sol
+        .stages
+        .iter()
+        .map(|s| {
+            let n = s.lm.as_ref().map_or_else(
+                || s.front.as_ref().map_or(0, |f| f.iterations),
+                |l| l.iterations,
+            );
+            format!("{} {} it {:.2} s", s.name, n, s.seconds)
+        })
+        .collect();
+    println!(
+        "surfaces: {seconds:.2} s ({}); χ²/dof {:.3}, condition number {:.3e}",
+        iters.join(", "),
+        sol.reduced_chi2,
+        sol.condition_number
+    );
+    if !sol.rejected.is_empty() {
+        println!(
+            "  {} pixels left out as outliers (χ² > 49), e.g. (column, row) {:?}",
+            sol.rejected.len(),
+            &sol.rejected[..sol.rejected.len().min(5)]
+        );
+    }
+}
