@@ -236,7 +236,7 @@ pub fn reconstruct(
     options: &Options,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Reconstruction, PipelineError> {
-    let (spectral, points) = match input {
+    let first = match input {
         Input::Acquisition(acq) => {
             let t0 = Instant::now();
             acq.check_resolution(station.camera.width, station.camera.height)?;
@@ -249,27 +249,44 @@ pub fn reconstruct(
                 solver.push_frame(index, &frame)?;
                 progress(k + 1, total);
             }
-            let stage = spectral_stage(&mut solver, t0.elapsed().as_secs_f64())?;
-            (Some(stage), None)
+            First::Spectral(spectral_stage(&mut solver, t0.elapsed().as_secs_f64())?)
         }
-        Input::Streamed(solver) => (Some(spectral_stage(solver, 0.0)?), None),
-        Input::ScreenPoints(points) => (None, Some(points)),
+        Input::Streamed(solver) => First::Spectral(spectral_stage(solver, 0.0)?),
+        Input::ScreenPoints(points) => First::Points(points),
     };
-    let surfaces = options.surfaces.as_ref().map(|opts| {
-        let t = Instant::now();
-        let obs = match (&spectral, &points) {
-            (Some(s), _) => {
-                let cov = s.maps.screen_cov();
-                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?
-            }
-            (None, Some(p)) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
-            (None, None) => unreachable!("an input yields maps or points"),
-        };
-        let solution = solve_surfaces(&obs, station, opts)?;
-        let summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
-        Ok(SurfaceStage { solution, summary })
-    });
+    let surfaces = options
+        .surfaces
+        .as_ref()
+        .map(|opts| surface_stage(&first, station, opts));
+    let spectral = match first {
+        First::Spectral(s) => Some(s),
+        First::Points(_) => None,
+    };
     Ok(Reconstruction { spectral, surfaces })
+}
+
+/// Where the surface stage's screen points come from.
+enum First {
+    Spectral(SpectralStage),
+    Points(ScreenPoints),
+}
+
+fn surface_stage(
+    first: &First,
+    station: &Station,
+    opts: &SurfaceOptions,
+) -> Result<SurfaceStage, SurfaceError> {
+    let t = Instant::now();
+    let obs = match first {
+        First::Spectral(s) => {
+            let cov = s.maps.screen_cov();
+            Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?
+        }
+        First::Points(p) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
+    };
+    let solution = solve_surfaces(&obs, station, opts)?;
+    let summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
+    Ok(SurfaceStage { solution, summary })
 }
 
 fn spectral_stage(
