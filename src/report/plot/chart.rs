@@ -162,7 +162,7 @@ impl<'a> Chart<'a> {
             BLACK,
         )))?;
         let pitch = f64::from(self.plot.2) / self.values.len() as f64;
-        let cap = ((pitch * BAR_FILL * 0.6).round() as u32).clamp(2, 10);
+        let cap = ((pitch * BAR_FILL * 0.6).round() as u32).clamp(2, 8);
         chart.draw_series(finite().filter_map(|(i, &v)| {
             let s = sigma(self.std, i)?;
             Some(ErrorBar::new_vertical(j(i), v - s, v, v + s, BLACK, cap))

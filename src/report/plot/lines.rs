@@ -277,14 +277,17 @@ where
     Ok(())
 }
 
+/// A pixel offset.
+type Px = (i32, i32);
+
 /// Series `k`'s marker, centred on (0, 0) in pixels: a disc, square,
 /// triangle or diamond, filled for the first four series and outlined for
 /// the next four, in the series' colour. As a filled polygon (transparent
 /// for outlines) and its outline, so that every shape has one type.
-fn marker(k: usize, color: RGBColor) -> (Polygon<(i32, i32)>, PathElement<(i32, i32)>) {
+fn marker(k: usize, color: RGBColor) -> (Polygon<Px>, PathElement<Px>) {
     let r = MARKER_R;
     let rf = f64::from(r);
-    let corners: Vec<(i32, i32)> = match k % 4 {
+    let corners: Vec<Px> = match k % 4 {
         0 => (0..16)
             .map(|i| {
                 let a = f64::from(i) * std::f64::consts::PI / 8.0;
