@@ -245,3 +245,23 @@ fn bad_input_is_named() {
         assert!(err.to_string().contains(&p.display().to_string()), "{err}");
     }
 }
+
+#[test]
+fn colour_map_ends_centre_and_sides() {
+    let scale = DerivedColorMap::new(&RDBU);
+    let at = |t: f64| rgb(scale.get_color_normalized(t, 0.0, 1.0));
+    assert_eq!(at(0.0), rgb(RDBU[0]));
+    assert_eq!(at(1.0), rgb(RDBU[10]));
+    assert_eq!(at(0.5), [247, 247, 247]);
+    // Clamped outside [0, 1].
+    assert_eq!(at(-3.0), rgb(RDBU[0]));
+    assert_eq!(at(7.0), rgb(RDBU[10]));
+    // Halfway between the first two stops: linear in sRGB.
+    assert_eq!(at(0.05), [19, 75, 135]);
+    for k in 0..50 {
+        let d = k as f64 / 100.0;
+        let (lo, hi) = (at(0.5 - d - 0.01), at(0.5 + d + 0.01));
+        assert!(lo[2] > lo[0], "low side not blue at {d}: {lo:?}");
+        assert!(hi[0] > hi[2], "high side not red at {d}: {hi:?}");
+    }
+}
