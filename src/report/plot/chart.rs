@@ -1,116 +1,57 @@
-//! A bar chart of Zernike coefficients against Noll index, with ±1σ error
-//! bars.
+//! A bar chart of Zernike coefficients against Noll index j, with ±1σ
+//! error bars.
 //!
 //! ```text
-//!                 title
-//!  c    60 -+---------------------+
-//!  o        |  █                  |
-//!  e     0 -|--█--▄-----█---------|   zero line
-//!  f        |     █               |
-//!  .   -40 -+---------------------+
-//!           5    10   15   20
-//!                Noll j
+//!                      title
+//!   coefficient  60 -+---------------------+
+//!   (nm)             |  █                  |
+//!                 0 -|--█--▄-----█---------|   zero line
+//!                    |     █               |
+//!               -40 -+---------------------+
+//!                    5    10   15   20
+//!                         Noll j
 //! ```
 
 use std::path::Path;
 
-use super::canvas::{Canvas, Rgb, BLACK, WHITE};
-use super::font::{draw_text, draw_text_up, text_height, text_width};
-use super::ticks::{covering_ticks, Ticks};
-use super::{draw_centred, label_top, PlotError, MARGIN, NO_DATA, TEXT_SCALE};
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use super::font::{self, LABEL_PX, TICK_PX, TITLE_PX};
+use super::output::{self, Drawn, Figure, Format, Rasters};
+use super::{PlotError, NO_DATA};
 
 /// Most coefficients one chart draws (Noll j up to about 1000 would be
 /// radial order 44; our fits stop at 231 terms, order 20).
 pub const MAX_BARS: usize = 1000;
 /// The plot area is at least this wide; beyond ~93 bars it grows by
 /// [`MIN_PITCH`] per bar.
-const PLOT_MIN_W: usize = 560;
-/// Narrowest bar pitch in pixels: a 4-pixel bar and a 2-pixel gap.
-const MIN_PITCH: usize = 6;
+const PLOT_MIN_W: u32 = 560;
+/// Narrowest bar pitch in pixels.
+const MIN_PITCH: u32 = 6;
 /// Plot area height in pixels.
-const PLOT_H: usize = 360;
-/// Tick mark length and the gap between mark and label.
-const TICK: usize = 6;
-const LABEL_GAP: usize = 6;
-/// Most ticks on the y axis.
-const MAX_TICKS: usize = 7;
+const PLOT_H: u32 = 360;
+/// Blank border, and the label areas left of and below the plot.
+const MARGIN: u32 = 16;
+const Y_AXIS_W: u32 = 90;
+const X_AXIS_H: u32 = 60;
+/// Room right of the plot for half of the last x label.
+const RIGHT_PAD: u32 = 24;
+/// Pixels per x label, so that labels never touch.
+const X_LABEL_PITCH: u32 = 40;
+/// Each bar's width as a fraction of its pitch.
+const BAR_FILL: f64 = 0.7;
+/// Head room above and below the data, as a fraction of its span.
+const PAD: f64 = 0.06;
 
 /// Bars of positive and negative coefficients (the ends of the height
 /// map's colour map, so that sign reads the same in both pictures).
-pub(super) const POSITIVE: Rgb = [178, 24, 43];
-pub(super) const NEGATIVE: Rgb = [33, 102, 172];
+pub(super) const POSITIVE: RGBColor = RGBColor(178, 24, 43);
+pub(super) const NEGATIVE: RGBColor = RGBColor(33, 102, 172);
 /// Horizontal grid lines at the y ticks.
-const GRID: Rgb = [225, 225, 225];
-
-/// Where everything goes, in canvas pixels.
-#[derive(Debug, Clone, PartialEq)]
-struct Layout {
-    width: usize,
-    height: usize,
-    title_y: usize,
-    plot_x: usize,
-    plot_y: usize,
-    plot_w: usize,
-    pitch: usize,
-    bar_w: usize,
-}
-
-impl Layout {
-    fn new(n: usize, title: &str, y_labels: &[String]) -> Self {
-        let th = text_height(TEXT_SCALE);
-        let pitch = (PLOT_MIN_W / n).max(MIN_PITCH);
-        let label_w = y_labels
-            .iter()
-            .map(|l| text_width(l, TEXT_SCALE))
-            .max()
-            .unwrap_or(0);
-        // Axis name (turned), a gap, the labels, the tick marks.
-        let plot_x = MARGIN + th + 10 + label_w + LABEL_GAP + TICK;
-        let plot_w = pitch * n;
-        // Room right of the plot for half of the last x label.
-        let right = plot_x + plot_w + 24 + MARGIN;
-        let width = right.max(text_width(title, TEXT_SCALE) + 2 * MARGIN);
-        let title_y = MARGIN;
-        let plot_y = title_y + th + 16;
-        // Tick marks, x labels, a gap, the axis name.
-        let height = plot_y + PLOT_H + TICK + LABEL_GAP + th + 10 + th + MARGIN;
-        Self {
-            width,
-            height,
-            title_y,
-            plot_x,
-            plot_y,
-            plot_w,
-            pitch,
-            bar_w: (pitch * 2 / 3).max(1),
-        }
-    }
-
-    /// Row of value `v` on the y axis.
-    fn row(&self, ticks: &Ticks, v: f64) -> i64 {
-        let t = (ticks.hi() - v) / (ticks.hi() - ticks.lo());
-        self.plot_y as i64 + (t * (PLOT_H - 1) as f64).round() as i64
-    }
-
-    /// First column of bar `i`.
-    fn bar_x(&self, i: usize) -> i64 {
-        (self.plot_x + i * self.pitch + (self.pitch - self.bar_w) / 2) as i64
-    }
-
-    /// Centre column of bar `i`.
-    fn bar_centre(&self, i: usize) -> i64 {
-        self.bar_x(i) + (self.bar_w / 2) as i64
-    }
-}
-
-/// Labelled x ticks every this many Noll indices for `n` bars.
-fn x_tick_every(n: usize) -> usize {
-    match n {
-        0..=12 => 1,
-        13..=60 => 5,
-        _ => 10,
-    }
-}
+const GRID: RGBColor = RGBColor(225, 225, 225);
 
 /// The ±1σ half-width of bar `i` when it gets an error bar.
 fn sigma(std: &[f64], i: usize) -> Option<f64> {
@@ -129,66 +70,173 @@ fn data_range(values: &[f64], std: &[f64]) -> Option<(f64, f64)> {
     range
 }
 
-/// Grid, y ticks and labels, and the frame.
-fn draw_axes(c: &mut Canvas, l: &Layout, ticks: &Ticks, labels: &[String]) {
-    let (x0, x1) = (l.plot_x as i64, (l.plot_x + l.plot_w - 1) as i64);
-    for (&v, label) in ticks.values.iter().zip(labels) {
-        let y = l.row(ticks, v);
-        c.hline(x0, x1, y, GRID);
-        c.hline(x0 - TICK as i64, x0 - 1, y, BLACK);
-        let lx = x0 - (TICK + LABEL_GAP + text_width(label, TEXT_SCALE)) as i64;
-        draw_text(c, lx, label_top(y), label, TEXT_SCALE, BLACK);
-    }
-    c.stroke_rect(x0 - 1, l.plot_y as i64 - 1, l.plot_w + 2, PLOT_H + 2, BLACK);
+/// A validated chart, ready to draw.
+struct Chart<'a> {
+    values: &'a [f64],
+    std: &'a [f64],
+    first_index: usize,
+    title: &'a str,
+    /// The y axis, nm.
+    y: (f64, f64),
+    /// Whether any value is finite.
+    any: bool,
+    /// Plot area: left, top, width, height; and the picture's size.
+    plot: (u32, u32, u32, u32),
+    size: (u32, u32),
 }
 
-/// X ticks and labels at multiples of [`x_tick_every`], and both axis names.
-fn draw_x_axis(c: &mut Canvas, l: &Layout, n: usize, first_index: usize) {
-    let every = x_tick_every(n);
-    let below = (l.plot_y + PLOT_H + 1) as i64;
-    for i in (0..n).filter(|i| (first_index + i) % every == 0) {
-        let x = l.bar_centre(i);
-        c.vline(x, below, below + TICK as i64 - 1, BLACK);
-        let label = (first_index + i).to_string();
-        draw_centred(c, x, below + (TICK + LABEL_GAP) as i64, &label, BLACK);
-    }
-    let th = text_height(TEXT_SCALE) as i64;
-    let name_y = below + (TICK + LABEL_GAP) as i64 + th + 10;
-    draw_centred(c, (l.plot_x + l.plot_w / 2) as i64, name_y, "Noll j", BLACK);
-    let name = "coefficient (nm)";
-    let name_top = (l.plot_y + PLOT_H / 2) as i64 - text_width(name, TEXT_SCALE) as i64 / 2;
-    draw_text_up(c, MARGIN as i64, name_top, name, TEXT_SCALE, BLACK);
-}
-
-/// Bars from zero to each finite value, the zero line over their feet, then
-/// black error bars with caps.
-fn draw_bars(c: &mut Canvas, l: &Layout, ticks: &Ticks, values: &[f64], std: &[f64]) {
-    let zero = l.row(ticks, 0.0);
-    for (i, &v) in values.iter().enumerate().filter(|(_, v)| v.is_finite()) {
-        let y = l.row(ticks, v);
-        let color = if v >= 0.0 { POSITIVE } else { NEGATIVE };
-        let (top, bottom) = (y.min(zero), y.max(zero));
-        c.fill_rect(l.bar_x(i), top, l.bar_w, (bottom - top + 1) as usize, color);
-    }
-    let x1 = (l.plot_x + l.plot_w - 1) as i64;
-    c.hline(l.plot_x as i64, x1, zero, BLACK);
-    let cap = (l.bar_w / 2).min(4) as i64;
-    for (i, &v) in values.iter().enumerate().filter(|(_, v)| v.is_finite()) {
-        if let Some(s) = sigma(std, i) {
-            let (x, top, bottom) = (l.bar_centre(i), l.row(ticks, v + s), l.row(ticks, v - s));
-            c.vline(x, top, bottom, BLACK);
-            c.hline(x - cap, x + cap, top, BLACK);
-            c.hline(x - cap, x + cap, bottom, BLACK);
+impl<'a> Chart<'a> {
+    fn new(
+        values: &'a [f64],
+        std: &'a [f64],
+        first_index: usize,
+        title: &'a str,
+    ) -> Result<Self, PlotError> {
+        let n = values.len();
+        if n == 0 {
+            return Err(PlotError::Empty { argument: "values" });
         }
+        if n > MAX_BARS {
+            return Err(PlotError::TooMany {
+                argument: "values",
+                count: n,
+                max: MAX_BARS,
+            });
+        }
+        if !std.is_empty() && std.len() != n {
+            return Err(PlotError::LengthMismatch {
+                argument: "std",
+                expected: n,
+                found: std.len(),
+            });
+        }
+        font::register()?;
+        let range = data_range(values, std);
+        let (lo, hi) = range.unwrap_or((-1.0, 1.0));
+        let pad = PAD * (hi - lo).max(f64::MIN_POSITIVE);
+        let plot_w = PLOT_MIN_W.max(MIN_PITCH * n as u32);
+        let content_w = Y_AXIS_W + plot_w + RIGHT_PAD;
+        let width = content_w.max(font::text_width(title, TITLE_PX)) + 2 * MARGIN;
+        let top = MARGIN + TITLE_PX as u32 + 16;
+        let left = (width - content_w) / 2 + Y_AXIS_W;
+        Ok(Self {
+            values,
+            std,
+            first_index,
+            title,
+            y: (lo - pad, hi + pad),
+            any: range.is_some(),
+            plot: (left, top, plot_w, PLOT_H),
+            size: (width, top + PLOT_H + X_AXIS_H + MARGIN),
+        })
+    }
+
+    /// The x axis: Noll j, each bar one unit wide about its index.
+    fn x(&self) -> (f64, f64) {
+        let j0 = self.first_index as f64;
+        (j0 - 0.5, j0 + self.values.len() as f64 - 0.5)
+    }
+
+    /// Bars from zero to each finite value, then the zero line over their
+    /// feet, then black ±1σ error bars (a cap at each end, a ring at the
+    /// value).
+    fn draw_bars<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    ) -> Drawn<DB> {
+        let j = |i: usize| (self.first_index + i) as f64;
+        let finite = || {
+            self.values
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| v.is_finite())
+        };
+        chart.draw_series(finite().map(|(i, &v)| {
+            let color = if v >= 0.0 { POSITIVE } else { NEGATIVE };
+            let half = BAR_FILL / 2.0;
+            Rectangle::new([(j(i) - half, 0.0), (j(i) + half, v)], color.filled())
+        }))?;
+        let (x0, x1) = self.x();
+        chart.draw_series(std::iter::once(PathElement::new(
+            [(x0, 0.0), (x1, 0.0)],
+            BLACK,
+        )))?;
+        let pitch = f64::from(self.plot.2) / self.values.len() as f64;
+        let cap = ((pitch * BAR_FILL * 0.6).round() as u32).clamp(2, 8);
+        chart.draw_series(finite().filter_map(|(i, &v)| {
+            let s = sigma(self.std, i)?;
+            Some(ErrorBar::new_vertical(j(i), v - s, v, v + s, BLACK, cap))
+        }))?;
+        Ok(())
+    }
+}
+
+impl Figure for Chart<'_> {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, _: &Rasters) -> Drawn<DB> {
+        let title = Text::new(
+            self.title.to_string(),
+            ((self.size.0 / 2) as i32, MARGIN as i32),
+            font::text(TITLE_PX).pos(Pos::new(HPos::Center, VPos::Top)),
+        );
+        root.draw(&title)?;
+        let (x, y, w, h) = self.plot;
+        let area = root
+            .clone()
+            .shrink((x - Y_AXIS_W, y), (w + Y_AXIS_W, h + X_AXIS_H));
+        let (x0, x1) = self.x();
+        let mut chart = ChartBuilder::on(&area)
+            .y_label_area_size(Y_AXIS_W)
+            .x_label_area_size(X_AXIS_H)
+            .build_cartesian_2d(x0..x1, self.y.0..self.y.1)?;
+        let x_labels = self.values.len().min((w / X_LABEL_PITCH) as usize).max(1);
+        let integer = |v: &f64| {
+            let r = v.round();
+            if (v - r).abs() < 1e-6 {
+                format!("{r}")
+            } else {
+                String::new()
+            }
+        };
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .y_max_light_lines(0)
+            .bold_line_style(GRID)
+            .x_labels(x_labels)
+            .y_labels(7)
+            .label_style(font::text(TICK_PX))
+            .axis_desc_style(font::text(LABEL_PX))
+            .x_desc("Noll j")
+            .y_desc("coefficient (nm)")
+            .x_label_formatter(&integer)
+            .y_label_formatter(&|v| font::tick_label(*v))
+            .draw()?;
+        self.draw_bars(&mut chart)?;
+        let plot = chart.plotting_area().strip_coord_spec();
+        let (pw, ph) = plot.dim_in_pixel();
+        plot.draw(&Rectangle::new(
+            [(0, 0), (pw as i32 - 1, ph as i32 - 1)],
+            BLACK,
+        ))?;
+        if !self.any {
+            let at = ((pw / 2) as i32, (ph / 4) as i32);
+            let style = font::text(LABEL_PX).pos(Pos::new(HPos::Center, VPos::Center));
+            plot.draw(&Text::new(NO_DATA, at, style))?;
+        }
+        Ok(())
     }
 }
 
 /// Draws Zernike coefficients `values` (nm) as bars at Noll indices
 /// `first_index`, `first_index + 1`, …, with ±`std` (nm) error bars, a zero
-/// line, y ticks on 1-2-5 steps covering every bar and error bar, x ticks
-/// every 1, 5 or 10 indices (up to 12, up to 60, more bars) and the axis
-/// names "Noll j" and "coefficient (nm)". Positive bars are red, negative
-/// blue. The plot area is 560 pixels wide, or 6 per bar beyond 93 bars.
+/// line, y ticks on 1-2-5 steps over every bar and error bar, integer x
+/// ticks no closer than 40 pixels, and the axis names "Noll j" and
+/// "coefficient (nm)". Positive bars are red, negative blue. The plot area
+/// is 560 pixels wide, or 6 per bar beyond 93 bars.
 ///
 /// `std` holds one entry per value, or none at all for no error bars; a NaN,
 /// zero or negative entry draws no error bar. A NaN value draws no bar; with
@@ -197,8 +245,8 @@ fn draw_bars(c: &mut Canvas, l: &Layout, ticks: &Ticks, values: &[f64], std: &[f
 /// # Errors
 /// [`PlotError::Empty`] if `values` is empty, [`PlotError::TooMany`] beyond
 /// [`MAX_BARS`], [`PlotError::LengthMismatch`] if `std` is neither empty nor
-/// as long as `values`, [`PlotError::Io`] / [`PlotError::Encode`] naming
-/// `path` if the file cannot be written.
+/// as long as `values`, [`PlotError::Io`] / [`PlotError::Encode`] /
+/// [`PlotError::Draw`] naming `path` if the picture cannot be written.
 pub fn coefficient_chart_png(
     path: &Path,
     values: &[f64],
@@ -206,49 +254,29 @@ pub fn coefficient_chart_png(
     first_index: usize,
     title: &str,
 ) -> Result<(), PlotError> {
-    render(values, std, first_index, title)?.write_png(path)
+    output::write(
+        path,
+        Format::Png,
+        &Chart::new(values, std, first_index, title)?,
+    )
 }
 
-/// The picture [`coefficient_chart_png`] writes.
-fn render(
+/// [`coefficient_chart_png`] as SVG.
+///
+/// # Errors
+/// As [`coefficient_chart_png`].
+pub fn coefficient_chart_svg(
+    path: &Path,
     values: &[f64],
     std: &[f64],
     first_index: usize,
     title: &str,
-) -> Result<Canvas, PlotError> {
-    let n = values.len();
-    if n == 0 {
-        return Err(PlotError::Empty { argument: "values" });
-    }
-    if n > MAX_BARS {
-        return Err(PlotError::TooMany {
-            argument: "values",
-            count: n,
-            max: MAX_BARS,
-        });
-    }
-    if !std.is_empty() && std.len() != n {
-        return Err(PlotError::LengthMismatch {
-            argument: "std",
-            expected: n,
-            found: std.len(),
-        });
-    }
-    let range = data_range(values, std);
-    let (lo, hi) = range.unwrap_or((-1.0, 1.0));
-    let ticks = covering_ticks(lo, hi, MAX_TICKS);
-    let labels: Vec<String> = ticks.values.iter().map(|&v| ticks.step.label(v)).collect();
-    let l = Layout::new(n, title, &labels);
-    let mut c = Canvas::new(l.width, l.height, WHITE);
-    draw_centred(&mut c, (l.width / 2) as i64, l.title_y as i64, title, BLACK);
-    draw_axes(&mut c, &l, &ticks, &labels);
-    draw_bars(&mut c, &l, &ticks, values, std);
-    draw_x_axis(&mut c, &l, n, first_index);
-    if range.is_none() {
-        let (cx, cy) = (l.plot_x + l.plot_w / 2, l.plot_y + PLOT_H / 4);
-        draw_centred(&mut c, cx as i64, label_top(cy as i64), NO_DATA, BLACK);
-    }
-    Ok(c)
+) -> Result<(), PlotError> {
+    output::write(
+        path,
+        Format::Svg,
+        &Chart::new(values, std, first_index, title)?,
+    )
 }
 
 #[cfg(test)]

@@ -1,53 +1,103 @@
 //! A height map with a colour bar.
 //!
 //! ```text
-//!            title
-//!                          unit
-//!   +-----------------+   +--+-
-//!   |                 |   |  |- 60
-//!   |   map (nearest  |   |  |- 40
-//!   |   neighbour,    |   |  |   ...
-//!   |   ≥ 400 px)     |   |  |- -60
-//!   +-----------------+   +--+-
+//!                 title
+//!                                  nm
+//!        +-----------------+     +--+-
+//!    y   |                 |     |  |- 60
+//!   (mm) |   map (nearest  |     |  |- 40
+//!        |   neighbour,    |     |  |   ...
+//!        |   ≥ 400 px)     |     |  |- -60
+//!        +-----------------+     +--+-
+//!              x (mm)
 //! ```
+//!
+//! Axes in mm appear when the caller gives the map's [`Extent`].
 
 use std::path::Path;
 
-use super::canvas::{Canvas, Rgb, BLACK, WHITE};
-use super::colormap::diverging;
-use super::font::{text_height, text_width};
-use super::ticks::{covering_ticks, Ticks};
-use super::{draw_centred, label_top, max_abs, PlotError, MARGIN, NO_DATA, TEXT_SCALE};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use super::font::{self, LABEL_PX, TICK_PX, TITLE_PX};
+use super::output::{self, Drawn, Figure, Format, Raster, Rasters};
+use super::{max_abs, PlotError, NO_DATA};
 
 /// The map's longer side is drawn at least this many pixels long (by an
 /// integer zoom) ...
 const MAP_MIN: usize = 400;
 /// ... and at most this many (by nearest-neighbour subsampling).
 const MAP_MAX: usize = 800;
-/// Colour bar width and its gap from the map, in pixels.
-const BAR_W: usize = 24;
-const BAR_GAP: usize = 24;
+/// Blank border around the picture.
+const MARGIN: u32 = 16;
+/// Colour bar width, its gap from the map, and the room right of it for
+/// tick marks and labels.
+const BAR_W: u32 = 24;
+const BAR_GAP: u32 = 28;
+const BAR_LABELS_W: u32 = 72;
 /// The bar is at least this tall, so that its tick labels never touch.
-const BAR_MIN_H: usize = 200;
+const BAR_MIN_H: u32 = 200;
+/// Room for tick labels and the axis name left of and below the map,
+/// when it has axes.
+const Y_AXIS_W: u32 = 84;
+const X_AXIS_H: u32 = 60;
 /// Tick mark length and the gap between mark and label.
-const TICK: usize = 6;
-const LABEL_GAP: usize = 6;
+const TICK: i32 = 6;
+const LABEL_GAP: i32 = 6;
 /// Most ticks on the bar; the symmetric range then gets 5 to 7.
-const MAX_TICKS: usize = 7;
+const MAX_BAR_TICKS: usize = 7;
 
-/// Where everything goes, in canvas pixels.
-#[derive(Debug, Clone, PartialEq)]
-struct Layout {
-    width: usize,
-    height: usize,
-    title_y: usize,
-    map_x: usize,
-    map_y: usize,
-    map_w: usize,
-    map_h: usize,
-    bar_x: usize,
-    bar_y: usize,
-    bar_h: usize,
+/// Pixels outside the aperture (NaN heights): a mid-light grey, distinct
+/// from the map's near-white centre and from the white page.
+pub(super) const OUTSIDE: RGBColor = RGBColor(190, 190, 190);
+
+/// ColorBrewer "RdBu" (11 classes, reversed): dark blue for the most
+/// negative value through near-white at zero to dark red for the most
+/// positive; symmetric in lightness about its centre and readable by the
+/// common forms of colour blindness. Interpolated linearly in sRGB.
+const RDBU: [RGBColor; 11] = [
+    RGBColor(5, 48, 97),
+    RGBColor(33, 102, 172),
+    RGBColor(67, 147, 195),
+    RGBColor(146, 197, 222),
+    RGBColor(209, 229, 240),
+    RGBColor(247, 247, 247),
+    RGBColor(253, 219, 199),
+    RGBColor(244, 165, 130),
+    RGBColor(214, 96, 77),
+    RGBColor(178, 24, 43),
+    RGBColor(103, 0, 31),
+];
+
+/// The physical extent of a height map, in mm: column 0's outer edge at
+/// `x_mm.0`, the last column's at `x_mm.1`; the last row's outer edge at
+/// `y_mm.0`, row 0's (the top) at `y_mm.1` (y up, as the surface grids
+/// are laid out).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extent {
+    /// Left and right edges, mm.
+    pub x_mm: (f64, f64),
+    /// Bottom and top edges, mm.
+    pub y_mm: (f64, f64),
+}
+
+/// A height map to draw: `values` row-major, `width`×`height`, row 0 at
+/// the top; NaN or infinite = outside the aperture.
+#[derive(Debug, Clone, Copy)]
+pub struct HeightMap<'a> {
+    /// Heights in `unit`.
+    pub values: &'a [f64],
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Written above the picture.
+    pub title: &'a str,
+    /// Unit of the heights, written above the colour bar (e.g. "nm").
+    pub unit: &'a str,
+    /// Axes in mm when given.
+    pub extent: Option<Extent>,
 }
 
 /// The drawn size of a `w`×`h` map: integer zoom up to [`MAP_MIN`] on the
@@ -64,100 +114,289 @@ fn display_size(w: usize, h: usize) -> (usize, usize) {
     (side(w), side(h))
 }
 
-fn layout(w: usize, h: usize, title: &str, unit: &str, labels: &[String]) -> Layout {
-    let th = text_height(TEXT_SCALE);
-    let (map_w, map_h) = display_size(w, h);
-    let bar_h = map_h.max(BAR_MIN_H);
-    let label_w = labels
-        .iter()
-        .map(|l| text_width(l, TEXT_SCALE))
-        .max()
-        .unwrap_or(0);
-    let right = (TICK + LABEL_GAP + label_w).max(text_width(unit, TEXT_SCALE) / 2);
-    let content_w = map_w + BAR_GAP + BAR_W + right;
-    let width = content_w.max(text_width(title, TEXT_SCALE)) + 2 * MARGIN;
-    let title_y = MARGIN;
-    // Title, a gap, the unit above the bar, a gap.
-    let top = title_y + th + 12 + th + 8;
-    let map_x = (width - content_w) / 2;
-    Layout {
-        width,
-        // Half a label hangs below the lowest tick.
-        height: top + bar_h.max(map_h) + th / 2 + MARGIN,
-        title_y,
-        map_x,
-        map_y: top,
-        map_w,
-        map_h,
-        bar_x: map_x + map_w + BAR_GAP,
-        bar_y: top,
-        bar_h,
-    }
-}
-
-/// Colour of height `v` on a bar from `ticks.lo()` to `ticks.hi()`.
-fn color_of(v: f64, ticks: &Ticks) -> Rgb {
-    diverging((v - ticks.lo()) / (ticks.hi() - ticks.lo()))
-}
-
-/// Draws the map, nearest source pixel per drawn pixel.
-fn draw_map(c: &mut Canvas, l: &Layout, values: &[f64], w: usize, h: usize, ticks: &Ticks) {
-    for dy in 0..l.map_h {
-        let row = (dy * h / l.map_h).min(h - 1);
-        for dx in 0..l.map_w {
-            let col = (dx * w / l.map_w).min(w - 1);
-            let v = values[row * w + col];
-            // Infinities count as outside, like NaN.
-            let v = if v.is_finite() { v } else { f64::NAN };
-            c.set(
-                (l.map_x + dx) as i64,
-                (l.map_y + dy) as i64,
-                color_of(v, ticks),
-            );
+/// The bar's limit (±) and ticks: the 1-2-5 step that gives at most
+/// [`MAX_BAR_TICKS`] ticks over ±`m` rounded out to a multiple of it.
+fn bar_ticks(m: f64) -> (f64, Vec<f64>) {
+    let mut step = 10f64.powf((2.0 * m / (MAX_BAR_TICKS - 1) as f64).log10().floor());
+    let mut k = 1usize;
+    loop {
+        let s = step * [1.0, 2.0, 5.0][k % 3];
+        // Within 1e-9 of a step counts as on it: 60.000000001 is 60.
+        let n = (m / s - 1e-9).ceil().max(1.0);
+        if 2.0 * n < MAX_BAR_TICKS as f64 {
+            let ticks = (-(n as i64)..=n as i64).map(|i| i as f64 * s).collect();
+            return (n * s, ticks);
+        }
+        k += 1;
+        if k % 3 == 0 {
+            step *= 10.0;
         }
     }
 }
 
-/// Row of the bar showing value `v`.
-fn bar_row(l: &Layout, ticks: &Ticks, v: f64) -> i64 {
-    let t = (ticks.hi() - v) / (ticks.hi() - ticks.lo());
-    l.bar_y as i64 + (t * (l.bar_h - 1) as f64).round() as i64
+/// Where everything goes, in picture pixels.
+#[derive(Debug, Clone, PartialEq)]
+struct Layout {
+    size: (u32, u32),
+    /// Map plot area: left, top, width, height.
+    map: (u32, u32, u32, u32),
+    /// Colour bar: left, top, width, height.
+    bar: (u32, u32, u32, u32),
 }
 
-/// Draws the colour bar (top row the highest tick's colour, bottom row the
-/// lowest's), its frame, ticks, labels and the unit above it.
-fn draw_bar(c: &mut Canvas, l: &Layout, ticks: &Ticks, labels: &[String], unit: &str) {
-    for r in 0..l.bar_h {
-        let t = 1.0 - r as f64 / (l.bar_h - 1) as f64;
-        c.fill_rect(l.bar_x as i64, (l.bar_y + r) as i64, BAR_W, 1, diverging(t));
+impl Layout {
+    fn new(m: &HeightMap) -> Self {
+        let (mut w, mut h) = display_size(m.width, m.height);
+        if let Some(e) = m.extent {
+            // Square millimetres: the shorter side follows the extent.
+            let aspect = (e.y_mm.1 - e.y_mm.0) / (e.x_mm.1 - e.x_mm.0);
+            if aspect <= 1.0 {
+                h = ((w as f64 * aspect).round() as usize).max(1);
+            } else {
+                w = ((h as f64 / aspect).round() as usize).max(1);
+            }
+        }
+        let (w, h) = (w as u32, h as u32);
+        let (left, below) = if m.extent.is_some() {
+            (Y_AXIS_W, X_AXIS_H)
+        } else {
+            (0, TICK_PX as u32 / 2)
+        };
+        let bar_h = h.max(BAR_MIN_H);
+        let content_w = left + w + BAR_GAP + BAR_W + BAR_LABELS_W;
+        let title_w = font::text_width(m.title, TITLE_PX);
+        let width = content_w.max(title_w) + 2 * MARGIN;
+        // Title, a gap, the unit above the bar, a gap.
+        let top = MARGIN + TITLE_PX as u32 + 14 + LABEL_PX as u32 + 10;
+        let x0 = (width - content_w) / 2 + left;
+        Self {
+            size: (width, top + bar_h.max(h) + below + MARGIN),
+            map: (x0, top, w, h),
+            bar: (x0 + w + BAR_GAP, top, BAR_W, bar_h),
+        }
     }
-    let (x, y) = (l.bar_x as i64 - 1, l.bar_y as i64 - 1);
-    c.stroke_rect(x, y, BAR_W + 2, l.bar_h + 2, BLACK);
-    let right = (l.bar_x + BAR_W) as i64;
-    for (&v, label) in ticks.values.iter().zip(labels) {
-        let y = bar_row(l, ticks, v);
-        c.hline(right, right + TICK as i64 - 1, y, BLACK);
-        let lx = right + (TICK + LABEL_GAP) as i64;
-        super::font::draw_text(c, lx, label_top(y), label, TEXT_SCALE, BLACK);
-    }
-    let uy = l.bar_y as i64 - 8 - text_height(TEXT_SCALE) as i64;
-    draw_centred(c, (l.bar_x + BAR_W / 2) as i64, uy, unit, BLACK);
 }
 
-/// Draws the height map `values` (row-major, `width`×`height`, row 0 at the
-/// top; NaN or infinite = outside the aperture, drawn grey) on the diverging
-/// blue–white–red map of [`super::colormap`], symmetric about zero with
-/// limits ±max|value| rounded up to a nice tick. A colour bar with 5 to 7
-/// labelled ticks and `unit` stands at the right, `title` above. The map is
-/// zoomed (nearest neighbour) to at least 400 pixels on its longer side,
-/// or subsampled to at most 800. With no finite value the picture is drawn
-/// with limits ±1 and "no data" written across the map.
+/// A validated height map, ready to draw.
+struct Picture<'a> {
+    map: HeightMap<'a>,
+    layout: Layout,
+    /// Colour limits ±`limit` and the bar's ticks.
+    limit: f64,
+    ticks: Vec<f64>,
+    /// Whether any value is finite.
+    any: bool,
+}
+
+impl<'a> Picture<'a> {
+    fn new(map: HeightMap<'a>) -> Result<Self, PlotError> {
+        if map.width == 0 || map.height == 0 {
+            return Err(PlotError::Empty { argument: "values" });
+        }
+        let expected = map.width.saturating_mul(map.height);
+        if map.values.len() != expected {
+            return Err(PlotError::LengthMismatch {
+                argument: "values",
+                expected,
+                found: map.values.len(),
+            });
+        }
+        if let Some(e) = map.extent {
+            let ok = |(a, b): (f64, f64)| a.is_finite() && b.is_finite() && a < b;
+            if !ok(e.x_mm) || !ok(e.y_mm) {
+                return Err(PlotError::BadExtent {
+                    x_mm: e.x_mm,
+                    y_mm: e.y_mm,
+                });
+            }
+        }
+        font::register()?;
+        let peak = max_abs(map.values.iter().copied());
+        let (limit, ticks) = bar_ticks(peak.filter(|&p| p > 0.0).unwrap_or(1.0));
+        Ok(Self {
+            layout: Layout::new(&map),
+            map,
+            limit,
+            ticks,
+            any: peak.is_some(),
+        })
+    }
+
+    /// The colour of height `v`; NaN and infinities are [`OUTSIDE`].
+    fn color(&self, scale: &DerivedColorMap<RGBColor>, v: f64) -> RGBColor {
+        if v.is_finite() {
+            scale.get_color_normalized(v, -self.limit, self.limit)
+        } else {
+            OUTSIDE
+        }
+    }
+
+    /// The map's cells in colour, and the bar's gradient (top = +limit).
+    fn rasters(&self) -> (Raster, Raster) {
+        let scale = DerivedColorMap::new(&RDBU);
+        let rgb = |c: RGBColor| [c.0, c.1, c.2];
+        let cells = self
+            .map
+            .values
+            .iter()
+            .flat_map(|&v| rgb(self.color(&scale, v)));
+        let rows = self.layout.bar.3 as usize;
+        let bar = (0..rows).flat_map(|r| {
+            let t = 1.0 - r as f64 / (rows - 1) as f64;
+            rgb(self.color(&scale, self.limit * (2.0 * t - 1.0)))
+        });
+        let raster = |width, height, it: &mut dyn Iterator<Item = u8>| Raster {
+            width,
+            height,
+            rgb: it.collect(),
+        };
+        (
+            raster(self.map.width, self.map.height, &mut cells.into_iter()),
+            raster(1, rows, &mut bar.into_iter()),
+        )
+    }
+
+    /// The map, its frame and, with an extent, its axes in mm.
+    fn draw_map<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        cells: &Raster,
+        rasters: &Rasters,
+    ) -> Drawn<DB> {
+        let (x, y, w, h) = self.layout.map;
+        let Some(e) = self.map.extent else {
+            let area = root.clone().shrink((x, y), (w, h));
+            rasters.draw(&area, cells)?;
+            return frame(&area);
+        };
+        let area = root
+            .clone()
+            .shrink((x - Y_AXIS_W, y), (w + Y_AXIS_W, h + X_AXIS_H));
+        let mut chart = ChartBuilder::on(&area)
+            .y_label_area_size(Y_AXIS_W)
+            .x_label_area_size(X_AXIS_H)
+            .build_cartesian_2d(e.x_mm.0..e.x_mm.1, e.y_mm.0..e.y_mm.1)?;
+        rasters.draw(&chart.plotting_area().strip_coord_spec(), cells)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_labels(6)
+            .y_labels(6)
+            .label_style(font::text(TICK_PX))
+            .axis_desc_style(font::text(LABEL_PX))
+            .x_desc("x (mm)")
+            .y_desc("y (mm)")
+            .x_label_formatter(&|v| font::tick_label(*v))
+            .y_label_formatter(&|v| font::tick_label(*v))
+            .draw()?;
+        frame(&chart.plotting_area().strip_coord_spec())
+    }
+
+    /// The colour bar, its ticks and labels, and the unit above it.
+    fn draw_bar<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        bar: &Raster,
+        rasters: &Rasters,
+    ) -> Drawn<DB> {
+        let (x, y, w, h) = self.layout.bar;
+        let area = root.clone().shrink((x, y), (w, h));
+        rasters.draw(&area, bar)?;
+        frame(&area)?;
+        let right = (x + w) as i32;
+        let label = font::text(TICK_PX).pos(Pos::new(HPos::Left, VPos::Center));
+        for &v in &self.ticks {
+            let row = self.bar_row(v);
+            root.draw(&PathElement::new(
+                [(right, row), (right + TICK, row)],
+                BLACK,
+            ))?;
+            let at = (right + TICK + LABEL_GAP, row);
+            root.draw(&Text::new(font::tick_label(v), at, label.clone()))?;
+        }
+        let unit = Text::new(
+            self.map.unit.to_string(),
+            ((x + w / 2) as i32, y as i32 - 8),
+            font::text(LABEL_PX).pos(Pos::new(HPos::Center, VPos::Bottom)),
+        );
+        root.draw(&unit)
+    }
+
+    /// The picture row of the bar showing value `v`.
+    fn bar_row(&self, v: f64) -> i32 {
+        let (_, y, _, h) = self.layout.bar;
+        let t = (self.limit - v) / (2.0 * self.limit);
+        y as i32 + (t * f64::from(h - 1)).round() as i32
+    }
+}
+
+/// A one-pixel black outline just outside `area`.
+fn frame<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>) -> Drawn<DB> {
+    let (w, h) = area.dim_in_pixel();
+    area.draw(&Rectangle::new(
+        [(0, 0), (w as i32 - 1, h as i32 - 1)],
+        BLACK,
+    ))
+}
+
+impl Figure for Picture<'_> {
+    fn size(&self) -> (u32, u32) {
+        self.layout.size
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        rasters: &Rasters,
+    ) -> Drawn<DB> {
+        let title = Text::new(
+            self.map.title.to_string(),
+            ((self.layout.size.0 / 2) as i32, MARGIN as i32),
+            font::text(TITLE_PX).pos(Pos::new(HPos::Center, VPos::Top)),
+        );
+        root.draw(&title)?;
+        let (cells, bar) = self.rasters();
+        self.draw_map(root, &cells, rasters)?;
+        self.draw_bar(root, &bar, rasters)?;
+        if !self.any {
+            let (x, y, w, h) = self.layout.map;
+            let note = Text::new(
+                NO_DATA,
+                ((x + w / 2) as i32, (y + h / 2) as i32),
+                font::text(LABEL_PX).pos(Pos::new(HPos::Center, VPos::Center)),
+            );
+            root.draw(&note)?;
+        }
+        Ok(())
+    }
+}
+
+/// Draws the height map `map` to `path` as `format`: the map on the
+/// diverging blue–white–red ColorBrewer "RdBu" scale, symmetric about zero
+/// with limits ±max|value| rounded out to a tick (1-2-5 steps, 5 to 7
+/// ticks), a colour bar with those ticks and `unit` at the right, `title`
+/// above, and axes in mm where `map.extent` is given. Cells outside the
+/// aperture (NaN, infinite) are grey. The map is zoomed (nearest
+/// neighbour) to at least 400 pixels on its longer side, or subsampled to
+/// at most 800; with an extent its shorter side follows the extent's
+/// aspect. With no finite value the picture is drawn with limits ±1 and
+/// "no data" written across the map.
 ///
 /// # Errors
 /// [`PlotError::Empty`] if `width` or `height` is zero,
 /// [`PlotError::LengthMismatch`] if `values` does not hold
-/// `width`×`height` entries, [`PlotError::Io`] / [`PlotError::Encode`]
-/// naming `path` if the file cannot be written.
+/// `width`×`height` entries, [`PlotError::BadExtent`] for an empty or
+/// non-finite extent, [`PlotError::Io`] / [`PlotError::Encode`] /
+/// [`PlotError::Draw`] naming `path` if the picture cannot be written.
+pub fn height_map(path: &Path, format: Format, map: &HeightMap) -> Result<(), PlotError> {
+    output::write(path, format, &Picture::new(*map)?)
+}
+
+/// [`height_map`] as PNG, without axes: `values` row-major,
+/// `width`×`height`, row 0 at the top, in `unit`.
+///
+/// # Errors
+/// As [`height_map`].
 pub fn height_map_png(
     path: &Path,
     values: &[f64],
@@ -166,42 +405,38 @@ pub fn height_map_png(
     title: &str,
     unit: &str,
 ) -> Result<(), PlotError> {
-    render(values, width, height, title, unit)?.write_png(path)
+    let map = HeightMap {
+        values,
+        width,
+        height,
+        title,
+        unit,
+        extent: None,
+    };
+    height_map(path, Format::Png, &map)
 }
 
-/// The picture [`height_map_png`] writes.
-fn render(
+/// [`height_map_png`] as SVG.
+///
+/// # Errors
+/// As [`height_map`].
+pub fn height_map_svg(
+    path: &Path,
     values: &[f64],
     width: usize,
     height: usize,
     title: &str,
     unit: &str,
-) -> Result<Canvas, PlotError> {
-    if width == 0 || height == 0 {
-        return Err(PlotError::Empty { argument: "values" });
-    }
-    let expected = width.saturating_mul(height);
-    if values.len() != expected {
-        return Err(PlotError::LengthMismatch {
-            argument: "values",
-            expected,
-            found: values.len(),
-        });
-    }
-    let limit = max_abs(values.iter().copied());
-    let m = limit.unwrap_or(1.0);
-    let ticks = covering_ticks(-m, m, MAX_TICKS);
-    let labels: Vec<String> = ticks.values.iter().map(|&v| ticks.step.label(v)).collect();
-    let l = layout(width, height, title, unit, &labels);
-    let mut c = Canvas::new(l.width, l.height, WHITE);
-    draw_centred(&mut c, (l.width / 2) as i64, l.title_y as i64, title, BLACK);
-    draw_map(&mut c, &l, values, width, height, &ticks);
-    draw_bar(&mut c, &l, &ticks, &labels, unit);
-    if limit.is_none() {
-        let (cx, cy) = (l.map_x + l.map_w / 2, l.map_y + l.map_h / 2);
-        draw_centred(&mut c, cx as i64, label_top(cy as i64), NO_DATA, BLACK);
-    }
-    Ok(c)
+) -> Result<(), PlotError> {
+    let map = HeightMap {
+        values,
+        width,
+        height,
+        title,
+        unit,
+        extent: None,
+    };
+    height_map(path, Format::Svg, &map)
 }
 
 #[cfg(test)]

@@ -13,48 +13,49 @@
 
 use std::path::Path;
 
-use super::canvas::{Canvas, Rgb, BLACK, WHITE};
-use super::font::{draw_text, draw_text_up, text_height, text_width};
-use super::lines_axis::{usable, Axis};
-use super::strokes::{marker, segment, MARKERS};
-use super::{draw_centred, label_top, PlotError, MARGIN, NO_DATA, TEXT_SCALE};
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use super::font::{self, LABEL_PX, TICK_PX, TITLE_PX};
+use super::lines_axis::{legend_corner, usable, AxisRange};
+use super::output::{self, Drawn, Figure, Format, Rasters};
+use super::{PlotError, NO_DATA};
 
 /// Most series one panel draws: one per colour and marker shape.
 pub const MAX_SERIES: usize = 8;
 /// Plot area of each panel, in pixels.
-const PLOT_W: usize = 480;
-const PLOT_H: usize = 360;
-/// Tick mark length and the gap between mark and label.
-const TICK: usize = 6;
-const LABEL_GAP: usize = 6;
-/// Most ticks per axis (x labels sit side by side, so fewer).
-const MAX_X_TICKS: usize = 6;
-const MAX_Y_TICKS: usize = 7;
-/// Room right of the plot for half of the last x label.
-const RIGHT_PAD: usize = 32;
-/// Half the width of series lines, in pixels.
-const LINE_HALF_WIDTH: f64 = 1.0;
-/// Grid lines at the ticks.
-const GRID: Rgb = [225, 225, 225];
+const PLOT_W: u32 = 480;
+const PLOT_H: u32 = 360;
+/// Blank border, and the label areas left of and below each plot.
+const MARGIN: u32 = 16;
+const Y_AXIS_W: u32 = 90;
+const X_AXIS_H: u32 = 60;
+/// Room right of each plot for half of the last x label.
+const RIGHT_PAD: u32 = 32;
+/// A panel's width when its title is not wider.
+const PANEL_W: u32 = MARGIN + Y_AXIS_W + PLOT_W + RIGHT_PAD;
+/// Series line width and marker size, pixels.
+const LINE_W: u32 = 2;
+const MARKER_R: i32 = 5;
+/// Half the length of a legend's line sample.
+const LEGEND_SAMPLE: i32 = 14;
 /// Series colours: matplotlib's "tab10" (Tableau 10) without its grey,
 /// which would read as grid.
-const PALETTE: [Rgb; MAX_SERIES] = [
-    [31, 119, 180],
-    [255, 127, 14],
-    [44, 160, 44],
-    [214, 39, 40],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [23, 190, 207],
+pub(super) const PALETTE: [RGBColor; MAX_SERIES] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
 ];
-/// Legend: inset from the plot frame, inner padding, sample line length,
-/// gap before the label, row pitch.
-const LEGEND_INSET: usize = 8;
-const LEGEND_PAD: usize = 6;
-const LEGEND_SAMPLE: usize = 28;
-const LEGEND_GAP: usize = 8;
-const LEGEND_ROW: usize = 22;
+/// Grid lines at the ticks, and the legend's frame.
+const GRID: RGBColor = RGBColor(225, 225, 225);
+pub(super) const LEGEND_BORDER: RGBColor = RGBColor(120, 120, 120);
 
 /// One line series: points (x, y), a legend label; drawn as a polyline with
 /// markers.
@@ -83,264 +84,261 @@ pub struct Panel<'a> {
     pub series: &'a [Series<'a>],
 }
 
-/// Where one panel goes, in canvas pixels, and its axes.
-#[derive(Debug, Clone)]
-struct PanelGeom {
-    left: usize,
-    width: usize,
-    plot_x: usize,
-    plot_y: usize,
-    x: Axis,
-    y: Axis,
-}
-
-/// Height of every panel and so of the picture: title, plot, tick labels,
-/// x axis name.
-fn picture_height() -> usize {
-    let th = text_height(TEXT_SCALE);
-    plot_top() + PLOT_H + TICK + LABEL_GAP + th + 10 + th + MARGIN
-}
-
-/// First row of every plot area.
-fn plot_top() -> usize {
-    MARGIN + text_height(TEXT_SCALE) + 12
-}
-
-impl PanelGeom {
-    fn new(panel: &Panel, left: usize) -> Self {
-        // Only points that can be drawn set the ranges.
-        let points = || {
-            let all = panel.series.iter().flat_map(|s| s.points.iter());
-            all.filter(|p| usable(p.0, panel.log_x) && usable(p.1, panel.log_y))
-        };
-        let x = Axis::new(points().map(|p| p.0), panel.log_x, MAX_X_TICKS);
-        let y = Axis::new(points().map(|p| p.1), panel.log_y, MAX_Y_TICKS);
-        let label_w = y.labels.iter().map(|l| text_width(l, TEXT_SCALE)).max();
-        // Axis name (turned), a gap, the labels, the tick marks.
-        let th = text_height(TEXT_SCALE);
-        let plot_dx = MARGIN + th + 10 + label_w.unwrap_or(0) + LABEL_GAP + TICK;
-        let width = (plot_dx + PLOT_W + RIGHT_PAD)
-            .max(plot_dx + text_width(panel.title, TEXT_SCALE) / 2 + PLOT_W / 2 + MARGIN);
-        Self {
-            left,
-            width,
-            plot_x: left + plot_dx,
-            plot_y: plot_top(),
-            x,
-            y,
-        }
-    }
-
-    /// Canvas position of data point `p`, or `None` where it cannot be
-    /// drawn (non-finite, or not positive on a log axis).
-    fn to_px(&self, p: (f64, f64)) -> Option<(f64, f64)> {
-        let (fx, fy) = (self.x.frac(p.0)?, self.y.frac(p.1)?);
-        Some((
-            self.plot_x as f64 + fx * (PLOT_W - 1) as f64,
-            self.plot_y as f64 + (1.0 - fy) * (PLOT_H - 1) as f64,
-        ))
-    }
-
-    fn right(&self) -> i64 {
-        (self.plot_x + PLOT_W - 1) as i64
-    }
-
-    fn bottom(&self) -> i64 {
-        (self.plot_y + PLOT_H - 1) as i64
+impl Panel<'_> {
+    /// The points that can be drawn (finite, and positive on a log axis).
+    fn usable_points(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        let all = self.series.iter().flat_map(|s| s.points.iter().copied());
+        all.filter(|p| usable(p.0, self.log_x) && usable(p.1, self.log_y))
     }
 }
 
-/// Draws `panels` side by side in one RGB8 PNG, each with a 480×360 plot
-/// area: title, grid and ticks (1-2-5 steps, or powers of ten on log
-/// axes), each series as a 2-pixel anti-aliased polyline in its own colour
-/// with its own marker shape, and a legend in the plot corner it hides
-/// least. Points that cannot be placed (NaN, infinite, or not positive on
-/// a log axis) are skipped and break the line there; a series without any
-/// still appears in the legend, and a panel without any reads "no data".
-///
-/// # Errors
-/// [`PlotError::Empty`] if `panels` is empty, [`PlotError::TooMany`] if a
-/// panel has more than [`MAX_SERIES`] series, [`PlotError::Io`] /
-/// [`PlotError::Encode`] naming `path` if the file cannot be written.
-pub fn line_plot_png(path: &Path, panels: &[Panel]) -> Result<(), PlotError> {
-    render(panels)?.write_png(path)
+/// Where one panel goes: its left edge and width, in picture pixels.
+#[derive(Debug, Clone, PartialEq)]
+struct Geom {
+    left: u32,
+    width: u32,
+    x: AxisRange,
+    y: AxisRange,
 }
 
-/// The picture [`line_plot_png`] writes.
-fn render(panels: &[Panel]) -> Result<Canvas, PlotError> {
-    if panels.is_empty() {
-        return Err(PlotError::Empty { argument: "panels" });
+impl Geom {
+    /// The plot area's left edge, in picture pixels.
+    fn plot_x(&self) -> u32 {
+        self.left + MARGIN + (self.width - PANEL_W) / 2 + Y_AXIS_W
     }
-    if let Some(p) = panels.iter().find(|p| p.series.len() > MAX_SERIES) {
-        return Err(PlotError::TooMany {
-            argument: "series",
-            count: p.series.len(),
-            max: MAX_SERIES,
-        });
-    }
-    let geoms = layout(panels);
-    let width = geoms.last().map_or(0, |g| g.left + g.width);
-    let mut c = Canvas::new(width, picture_height(), WHITE);
-    for (panel, g) in panels.iter().zip(&geoms) {
-        draw_panel(&mut c, panel, g);
-    }
-    Ok(c)
+}
+
+/// The first row of every plot area.
+fn plot_top() -> u32 {
+    MARGIN + TITLE_PX as u32 + 14
 }
 
 /// Each panel's place, left to right.
-fn layout(panels: &[Panel]) -> Vec<PanelGeom> {
+fn layout(panels: &[Panel]) -> Vec<Geom> {
     let mut left = 0;
     panels
         .iter()
         .map(|p| {
-            let g = PanelGeom::new(p, left);
-            left += g.width;
+            let x = AxisRange::new(p.usable_points().map(|q| q.0), p.log_x);
+            let y = AxisRange::new(p.usable_points().map(|q| q.1), p.log_y);
+            let width = PANEL_W.max(font::text_width(p.title, TITLE_PX) + 2 * MARGIN);
+            let g = Geom { left, width, x, y };
+            left += width;
             g
         })
         .collect()
 }
 
-fn draw_panel(c: &mut Canvas, panel: &Panel, g: &PanelGeom) {
-    let cx = (g.plot_x + PLOT_W / 2) as i64;
-    draw_centred(c, cx, MARGIN as i64, panel.title, BLACK);
-    draw_grid(c, g);
-    let mut any = false;
-    for (k, s) in panel.series.iter().enumerate() {
-        any |= draw_series(c, g, s, k);
+/// A validated plot, ready to draw.
+struct Plot<'a> {
+    panels: &'a [Panel<'a>],
+    geoms: Vec<Geom>,
+}
+
+impl<'a> Plot<'a> {
+    fn new(panels: &'a [Panel<'a>]) -> Result<Self, PlotError> {
+        if panels.is_empty() {
+            return Err(PlotError::Empty { argument: "panels" });
+        }
+        if let Some(p) = panels.iter().find(|p| p.series.len() > MAX_SERIES) {
+            return Err(PlotError::TooMany {
+                argument: "series",
+                count: p.series.len(),
+                max: MAX_SERIES,
+            });
+        }
+        font::register()?;
+        Ok(Self {
+            geoms: layout(panels),
+            panels,
+        })
     }
-    c.stroke_rect(
-        g.plot_x as i64 - 1,
-        g.plot_y as i64 - 1,
-        PLOT_W + 2,
-        PLOT_H + 2,
+}
+
+impl Figure for Plot<'_> {
+    fn size(&self) -> (u32, u32) {
+        let g = self.geoms.last().expect("at least one panel");
+        (g.left + g.width, plot_top() + PLOT_H + X_AXIS_H + MARGIN)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, _: &Rasters) -> Drawn<DB> {
+        for (panel, g) in self.panels.iter().zip(&self.geoms) {
+            let title = Text::new(
+                panel.title.to_string(),
+                ((g.plot_x() + PLOT_W / 2) as i32, MARGIN as i32),
+                font::text(TITLE_PX).pos(Pos::new(HPos::Center, VPos::Top)),
+            );
+            root.draw(&title)?;
+            let at = (g.plot_x() - Y_AXIS_W, plot_top());
+            let area = root
+                .clone()
+                .shrink(at, (Y_AXIS_W + PLOT_W, PLOT_H + X_AXIS_H));
+            let (x, y) = (g.x.span(), g.y.span());
+            match (panel.log_x, panel.log_y) {
+                (false, false) => draw_panel(&area, panel, g, x, y),
+                (true, false) => draw_panel(&area, panel, g, x.log_scale(), y),
+                (false, true) => draw_panel(&area, panel, g, x, y.log_scale()),
+                (true, true) => draw_panel(&area, panel, g, x.log_scale(), y.log_scale()),
+            }?;
+        }
+        Ok(())
+    }
+}
+
+/// One panel on `area` (its label areas and plot), with axes `x` and `y`.
+fn draw_panel<DB, X, Y>(
+    area: &DrawingArea<DB, Shift>,
+    panel: &Panel,
+    g: &Geom,
+    x: X,
+    y: Y,
+) -> Drawn<DB>
+where
+    DB: DrawingBackend,
+    X: AsRangedCoord<Value = f64>,
+    Y: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let mut chart = ChartBuilder::on(area)
+        .y_label_area_size(Y_AXIS_W)
+        .x_label_area_size(X_AXIS_H)
+        .build_cartesian_2d(x, y)?;
+    let x_label = |v: &f64| g.x.label(*v);
+    let y_label = |v: &f64| g.y.label(*v);
+    chart
+        .configure_mesh()
+        .bold_line_style(GRID)
+        .light_line_style(WHITE.mix(0.0))
+        .x_labels(6)
+        .y_labels(7)
+        .label_style(font::text(TICK_PX))
+        .axis_desc_style(font::text(LABEL_PX))
+        .x_desc(panel.x_label)
+        .y_desc(panel.y_label)
+        .x_label_formatter(&x_label)
+        .y_label_formatter(&y_label)
+        .draw()?;
+    let usable_point = |p: &&(f64, f64)| usable(p.0, panel.log_x) && usable(p.1, panel.log_y);
+    for (k, s) in panel.series.iter().enumerate() {
+        let color = PALETTE[k % MAX_SERIES];
+        let line = color.stroke_width(LINE_W);
+        for run in s.points.split(|p| !usable_point(&p)) {
+            chart.draw_series(std::iter::once(PathElement::new(run.to_vec(), line)))?;
+        }
+        let points = s.points.iter().filter(usable_point);
+        chart
+            .draw_series(points.map(|&p| {
+                let (fill, outline) = marker(k, color);
+                EmptyElement::at(p) + fill + outline
+            }))?
+            .label(s.label)
+            .legend(move |(x, y)| {
+                let (fill, outline) = marker(k, color);
+                let sample = PathElement::new([(-LEGEND_SAMPLE, 0), (LEGEND_SAMPLE, 0)], line);
+                EmptyElement::at((x + LEGEND_SAMPLE, y)) + sample + fill + outline
+            });
+    }
+    let plot = chart.plotting_area().strip_coord_spec();
+    let (pw, ph) = plot.dim_in_pixel();
+    plot.draw(&Rectangle::new(
+        [(0, 0), (pw as i32 - 1, ph as i32 - 1)],
         BLACK,
-    );
-    draw_axis_names(c, g, panel);
-    if !any {
-        let cy = (g.plot_y + PLOT_H / 4) as i64;
-        draw_centred(c, cx, label_top(cy), NO_DATA, BLACK);
+    ))?;
+    if panel.usable_points().next().is_none() {
+        let style = font::text(LABEL_PX).pos(Pos::new(HPos::Center, VPos::Center));
+        plot.draw(&Text::new(
+            NO_DATA,
+            ((pw / 2) as i32, (ph / 4) as i32),
+            style,
+        ))?;
     }
     if !panel.series.is_empty() {
-        draw_legend(c, g, panel.series);
+        let polylines: Vec<Vec<(f64, f64)>> = panel
+            .series
+            .iter()
+            .map(|s| {
+                s.points
+                    .iter()
+                    .map(|&(px, py)| (g.x.frac(px), g.y.frac(py)))
+                    .collect()
+            })
+            .collect();
+        chart
+            .configure_series_labels()
+            .position(legend_corner(&polylines))
+            .margin(8)
+            .legend_area_size(2 * LEGEND_SAMPLE + 8)
+            .label_font(font::text(LABEL_PX))
+            .background_style(WHITE)
+            .border_style(LEGEND_BORDER)
+            .draw()?;
     }
+    Ok(())
 }
 
-/// Grid lines, tick marks and tick labels of both axes.
-fn draw_grid(c: &mut Canvas, g: &PanelGeom) {
-    let (x0, y0) = (g.plot_x as i64, g.plot_y as i64);
-    for (&v, label) in g.y.ticks.iter().zip(&g.y.labels) {
-        let Some((_, y)) = g.to_px((x_any(g), v)) else {
-            continue;
-        };
-        let y = y.round() as i64;
-        c.hline(x0, g.right(), y, GRID);
-        c.hline(x0 - 1 - TICK as i64, x0 - 2, y, BLACK);
-        let lx = x0 - 1 - (TICK + LABEL_GAP + text_width(label, TEXT_SCALE)) as i64;
-        draw_text(c, lx, label_top(y), label, TEXT_SCALE, BLACK);
-    }
-    let below = g.bottom() + 2;
-    for (&v, label) in g.x.ticks.iter().zip(&g.x.labels) {
-        let Some((x, _)) = g.to_px((v, y_any(g))) else {
-            continue;
-        };
-        let x = x.round() as i64;
-        c.vline(x, y0, g.bottom(), GRID);
-        c.vline(x, below, below + TICK as i64 - 1, BLACK);
-        draw_centred(c, x, below + (TICK + LABEL_GAP) as i64, label, BLACK);
-    }
+/// A pixel offset.
+type Px = (i32, i32);
+
+/// Series `k`'s marker, centred on (0, 0) in pixels: a disc, square,
+/// triangle or diamond, filled for the first four series and outlined for
+/// the next four, in the series' colour. As a filled polygon (transparent
+/// for outlines) and its outline, so that every shape has one type.
+fn marker(k: usize, color: RGBColor) -> (Polygon<Px>, PathElement<Px>) {
+    let r = MARKER_R;
+    let rf = f64::from(r);
+    let corners: Vec<Px> = match k % 4 {
+        0 => (0..16)
+            .map(|i| {
+                let a = f64::from(i) * std::f64::consts::PI / 8.0;
+                ((rf * a.cos()).round() as i32, (rf * a.sin()).round() as i32)
+            })
+            .collect(),
+        1 => vec![
+            (-r + 1, -r + 1),
+            (r - 1, -r + 1),
+            (r - 1, r - 1),
+            (-r + 1, r - 1),
+        ],
+        2 => vec![(0, -r), (r, r - 1), (-r, r - 1)],
+        _ => vec![(0, -r), (r, 0), (0, r), (-r, 0)],
+    };
+    let fill = if k % MAX_SERIES < 4 {
+        color.filled()
+    } else {
+        TRANSPARENT.filled()
+    };
+    let mut outline = corners.clone();
+    outline.push(corners[0]);
+    (
+        Polygon::new(corners, fill),
+        PathElement::new(outline, color.stroke_width(2)),
+    )
 }
 
-/// A value placeable on the x axis (its first tick), to look up y rows.
-fn x_any(g: &PanelGeom) -> f64 {
-    g.x.ticks.first().copied().unwrap_or(1.0)
+/// Draws `panels` side by side in one PNG, each with a 480×360 plot area:
+/// title, grid and ticks (1-2-5 steps, or powers of ten on log axes), each
+/// series as a 2-pixel polyline in its own colour with its own marker
+/// shape, and a legend in the plot corner it hides least. Points that
+/// cannot be placed (NaN, infinite, or not positive on a log axis) are
+/// skipped and break the line there; a series without any still appears in
+/// the legend, and a panel without any reads "no data".
+///
+/// # Errors
+/// [`PlotError::Empty`] if `panels` is empty, [`PlotError::TooMany`] if a
+/// panel has more than [`MAX_SERIES`] series, [`PlotError::Io`] /
+/// [`PlotError::Encode`] / [`PlotError::Draw`] naming `path` if the picture
+/// cannot be written.
+pub fn line_plot_png(path: &Path, panels: &[Panel]) -> Result<(), PlotError> {
+    output::write(path, Format::Png, &Plot::new(panels)?)
 }
 
-/// A value placeable on the y axis, to look up x columns.
-fn y_any(g: &PanelGeom) -> f64 {
-    g.y.ticks.first().copied().unwrap_or(1.0)
-}
-
-fn draw_axis_names(c: &mut Canvas, g: &PanelGeom, panel: &Panel) {
-    let th = text_height(TEXT_SCALE) as i64;
-    let name_y = g.bottom() + 2 + (TICK + LABEL_GAP) as i64 + th + 10;
-    draw_centred(
-        c,
-        (g.plot_x + PLOT_W / 2) as i64,
-        name_y,
-        panel.x_label,
-        BLACK,
-    );
-    let w = text_width(panel.y_label, TEXT_SCALE) as i64;
-    let top = (g.plot_y + PLOT_H / 2) as i64 - w / 2;
-    draw_text_up(
-        c,
-        (g.left + MARGIN) as i64,
-        top,
-        panel.y_label,
-        TEXT_SCALE,
-        BLACK,
-    );
-}
-
-/// Series `k`'s line, broken at points that cannot be placed, then its
-/// markers. Whether any point was drawn.
-fn draw_series(c: &mut Canvas, g: &PanelGeom, s: &Series, k: usize) -> bool {
-    let color = PALETTE[k % MAX_SERIES];
-    let placed: Vec<Option<(f64, f64)>> = s.points.iter().map(|&p| g.to_px(p)).collect();
-    for pair in placed.windows(2) {
-        if let [Some(a), Some(b)] = pair {
-            segment(c, *a, *b, LINE_HALF_WIDTH, color);
-        }
-    }
-    for p in placed.iter().flatten() {
-        marker(c, *p, MARKERS[k % MAX_SERIES], color);
-    }
-    placed.iter().any(Option::is_some)
-}
-
-/// Width and height of the legend box for `series`.
-fn legend_size(series: &[Series]) -> (usize, usize) {
-    let label_w = series.iter().map(|s| text_width(s.label, TEXT_SCALE)).max();
-    let w = 2 * LEGEND_PAD + LEGEND_SAMPLE + LEGEND_GAP + label_w.unwrap_or(0);
-    (w, 2 * LEGEND_PAD + series.len() * LEGEND_ROW - 4)
-}
-
-/// Data pixels (neither page nor grid) inside the `w`×`h` box at (`x`, `y`).
-fn ink_under(c: &Canvas, x: i64, y: i64, w: usize, h: usize) -> usize {
-    let xs = x.max(0) as usize..((x + w as i64).max(0) as usize).min(c.width());
-    let ys = y.max(0) as usize..((y + h as i64).max(0) as usize).min(c.height());
-    ys.flat_map(|row| xs.clone().map(move |col| (col, row)))
-        .filter(|&(col, row)| !matches!(c.get(col, row), WHITE | GRID))
-        .count()
-}
-
-/// The legend in the plot corner (top right, top left, bottom right,
-/// bottom left, preferred in that order) where it covers the fewest data
-/// pixels.
-fn draw_legend(c: &mut Canvas, g: &PanelGeom, series: &[Series]) {
-    let (w, h) = legend_size(series);
-    let inset = LEGEND_INSET as i64;
-    let (left, top) = (g.plot_x as i64 + inset, g.plot_y as i64 + inset);
-    let right = g.right() - inset - w as i64 + 1;
-    let bottom = g.bottom() - inset - h as i64 + 1;
-    let corners = [(right, top), (left, top), (right, bottom), (left, bottom)];
-    let (x, y) = corners
-        .into_iter()
-        .min_by_key(|&(x, y)| ink_under(c, x, y, w, h))
-        .unwrap_or((right, top));
-    c.fill_rect(x, y, w, h, WHITE);
-    c.stroke_rect(x, y, w, h, [120, 120, 120]);
-    for (k, s) in series.iter().enumerate() {
-        let color = PALETTE[k % MAX_SERIES];
-        let row = y + (LEGEND_PAD + k * LEGEND_ROW) as i64;
-        let mid = (row + text_height(TEXT_SCALE) as i64 / 2 - 2) as f64;
-        let x0 = (x + LEGEND_PAD as i64) as f64;
-        let x1 = x0 + LEGEND_SAMPLE as f64;
-        segment(c, (x0 + 1.0, mid), (x1 - 1.0, mid), LINE_HALF_WIDTH, color);
-        marker(c, ((x0 + x1) / 2.0, mid), MARKERS[k % MAX_SERIES], color);
-        let tx = x1 as i64 + LEGEND_GAP as i64;
-        draw_text(c, tx, row, s.label, TEXT_SCALE, BLACK);
-    }
+/// [`line_plot_png`] as SVG.
+///
+/// # Errors
+/// As [`line_plot_png`].
+pub fn line_plot_svg(path: &Path, panels: &[Panel]) -> Result<(), PlotError> {
+    output::write(path, Format::Svg, &Plot::new(panels)?)
 }
 
 #[cfg(test)]

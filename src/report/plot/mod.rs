@@ -1,42 +1,42 @@
-//! Report pictures as RGB8 PNG files, drawn in pure Rust with a built-in
-//! bitmap font (no system fonts, no plotting library).
+//! Report pictures, drawn with `plotters` as PNG or SVG files, with text in
+//! an embedded DejaVu Sans (no system fonts needed).
 //!
-//! - [`height_map_png`]: a surface height map (nm) on the diverging map of
-//!   [`colormap`], with a colour bar and a title.
-//! - [`coefficient_chart_png`]: Zernike coefficients (nm) against Noll index
-//!   as bars with ±1σ error bars.
-//! - [`line_plot_png`]: panels of line series side by side, on linear or
-//!   logarithmic axes, with markers and legends.
-//! - [`nice_ticks`]: the 1-2-5 axis ticks they use.
+//! - [`height_map_png`] / [`height_map_svg`] / [`height_map`]: a surface
+//!   height map (nm) on a diverging colour map symmetric about zero, with a
+//!   colour bar labelled in the map's unit and, where the caller gives the
+//!   physical extent, axes in mm.
+//! - [`coefficient_chart_png`] / [`coefficient_chart_svg`]: Zernike
+//!   coefficients (nm) against Noll index j as bars with ±1σ error bars.
+//! - [`line_plot_png`] / [`line_plot_svg`]: panels of line series side by
+//!   side, on linear or logarithmic axes, with markers and legends.
 //!
-//! Pictures follow screen convention: pixel (0, 0) at the top left, rows
-//! downwards; height-map row 0 is drawn at the top. Data that leave nothing
-//! to draw (every value NaN) still give a picture, with "no data" written on
-//! it, so a report never lacks a figure; wrong lengths and empty inputs are
-//! errors.
+//! Each picture is drawn once by code generic over the `plotters` backend
+//! ([`output`] holds the two writers). Pictures follow screen convention:
+//! pixel (0, 0) at the top left; height-map row 0 is drawn at the top. Data
+//! that leave nothing to draw (every value NaN) still give a picture, with
+//! "no data" written on it, so a report never lacks a figure; wrong lengths
+//! and empty inputs are errors.
 
-pub mod canvas;
 mod chart;
-pub mod colormap;
-pub mod font;
+mod font;
 mod height_map;
 mod lines;
 mod lines_axis;
-mod strokes;
-mod ticks;
+mod output;
+mod svg;
 
 use std::path::PathBuf;
 
-pub use chart::{coefficient_chart_png, MAX_BARS};
-pub use height_map::height_map_png;
-pub use lines::{line_plot_png, Panel, Series, MAX_SERIES};
-pub use ticks::nice_ticks;
+pub use chart::{coefficient_chart_png, coefficient_chart_svg, MAX_BARS};
+pub use height_map::{height_map, height_map_png, height_map_svg, Extent, HeightMap};
+pub use lines::{line_plot_png, line_plot_svg, Panel, Series, MAX_SERIES};
+pub use output::Format;
 
 /// What went wrong drawing a picture.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
-    /// The picture file could not be created.
-    #[error("{path}: cannot create the picture: {source}")]
+    /// The picture file could not be created or written.
+    #[error("{path}: cannot write the picture: {source}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -52,6 +52,19 @@ pub enum PlotError {
         /// The encoder's error.
         #[source]
         source: png::EncodingError,
+    },
+    /// The embedded font could not be loaded (a corrupt build).
+    #[error("the embedded font DejaVu Sans could not be registered with the plotting library")]
+    Font,
+    /// The plotting library failed while drawing (before anything was
+    /// written).
+    #[error("{path}: drawing the picture failed: {source}")]
+    Draw {
+        /// The file it was meant for.
+        path: PathBuf,
+        /// The plotting library's error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// An input slice's length disagrees with the others.
     #[error("`{argument}` has {found} entries where {expected} were expected")]
@@ -79,12 +92,16 @@ pub enum PlotError {
         /// The most allowed.
         max: usize,
     },
+    /// A physical extent with an empty or non-finite side.
+    #[error("the extent {x_mm:?} × {y_mm:?} mm is empty or not finite")]
+    BadExtent {
+        /// Its x range, mm.
+        x_mm: (f64, f64),
+        /// Its y range, mm.
+        y_mm: (f64, f64),
+    },
 }
 
-/// Font scale of all text: each font pixel is a 2×2 square.
-const TEXT_SCALE: usize = 2;
-/// Blank border around every picture, in pixels.
-const MARGIN: usize = 16;
 /// Written across a plot area when no value is finite.
 const NO_DATA: &str = "no data";
 
@@ -98,14 +115,5 @@ fn max_abs(values: impl IntoIterator<Item = f64>) -> Option<f64> {
         .reduce(f64::max)
 }
 
-/// Draws `text` centred horizontally on `cx` with its top at `y`.
-fn draw_centred(canvas: &mut canvas::Canvas, cx: i64, y: i64, text: &str, color: canvas::Rgb) {
-    let w = font::text_width(text, TEXT_SCALE) as i64;
-    font::draw_text(canvas, cx - w / 2, y, text, TEXT_SCALE, color);
-}
-
-/// Where a tick label's top goes so that its capitals centre on row `y`.
-fn label_top(y: i64) -> i64 {
-    // Capitals occupy font rows 0..7; their middle is row 3.5.
-    y - (7 * TEXT_SCALE / 2) as i64
-}
+#[cfg(test)]
+mod test_util;
