@@ -346,7 +346,14 @@ fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, Pipe
         let path = out.join(format!("{name}_height_nm.npy"));
         npy::write_f64(&path, &[HEIGHT_GRID, HEIGHT_GRID], &grid)?;
         written.push(path);
-        written.push(pictures::surface(out, name, &grid, HEIGHT_GRID, figures)?);
+        written.push(pictures::surface(
+            out,
+            name,
+            surface,
+            &grid,
+            HEIGHT_GRID,
+            figures,
+        )?);
         written.extend(pictures::coefficients(out, name, figures)?);
     }
     let path = out.join("summary.json");

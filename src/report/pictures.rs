@@ -4,7 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
-use super::plot::{coefficient_chart_png, height_map_png, PlotError};
+use super::plot::{coefficient_chart_png, height_map, Extent, Format, HeightMap, PlotError};
+use crate::optics::zernike::ZernikeSurface;
 use crate::solve::surfaces::report::{SurfaceFigures, REMOVED_TERMS};
 
 fn title_case(name: &str) -> String {
@@ -14,14 +15,18 @@ fn title_case(name: &str) -> String {
         .unwrap_or_default()
 }
 
-/// `DIR/{name}.png`: the height map (`n × n` grid of nm, NaN outside the
-/// aperture) with its colour bar; returns the file written.
+/// `DIR/{name}.png`: the height map (`n × n` grid of nm over the
+/// aperture's bounding square of `surface`, as
+/// [`crate::solve::surfaces::report::height_grid`] makes it; NaN outside the
+/// aperture) with its colour bar in nm and axes in mm; returns the file
+/// written.
 ///
 /// # Errors
 /// [`PlotError`] when the picture cannot be drawn or written.
 pub fn surface(
     out: &Path,
     name: &str,
+    surface: &ZernikeSurface,
     grid: &[f64],
     n: usize,
     f: &SurfaceFigures,
@@ -33,8 +38,20 @@ pub fn surface(
         f.pv_nm,
         f.terms
     );
+    let (r, [cx, cy]) = (surface.basis().radius_mm(), surface.basis().center_mm());
+    let map = HeightMap {
+        values: grid,
+        width: n,
+        height: n,
+        title: &title,
+        unit: "nm",
+        extent: Some(Extent {
+            x_mm: (cx - r, cx + r),
+            y_mm: (cy - r, cy + r),
+        }),
+    };
     let path = out.join(format!("{name}.png"));
-    height_map_png(&path, grid, n, n, &title, "nm")?;
+    height_map(&path, Format::Png, &map)?;
     Ok(path)
 }
 
