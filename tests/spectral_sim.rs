@@ -86,7 +86,7 @@ fn run_patterns(
         .draw_pair(25.5, [0.0, 0.0], 21)
         .unwrap();
     let view = TracedView::trace(station, &Plate::new(station, front, back, 3.0));
-    let (solver, cam) = fed_solver(station, &view, params.clone(), patterns, config);
+    let (mut solver, cam) = fed_solver(station, &view, params.clone(), patterns, config);
     let frames: Vec<_> = FrameInfo::from_patterns(patterns);
     let maps = solver.solve().unwrap();
     // The bound of the same joint model at the truth (A, B from the Fresnel
@@ -435,8 +435,8 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts(engine: Engi
 struct Reversed(std::sync::atomic::AtomicUsize);
 
 impl FitBackend for Reversed {
-    fn fit(&self, batch: &FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
-        let n = batch.candidates.len();
+    fn fit(&self, batch: &mut FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
+        let n = batch.candidates().len();
         self.0.store(n, std::sync::atomic::Ordering::Relaxed);
         let mut runs: Vec<_> = batch
             .runs()
@@ -453,7 +453,7 @@ impl FitBackend for Reversed {
 struct Empty;
 
 impl FitBackend for Empty {
-    fn fit(&self, _: &FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
+    fn fit(&self, _: &mut FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
         Vec::new()
     }
 }
@@ -467,7 +467,7 @@ fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
         ..Schedule::default()
     };
     let view = TracedView::trace(&st, &Plate::new(&st, flat(&st), flat(&st), 3.0));
-    let (solver, _) = fed_solver(
+    let (mut solver, _) = fed_solver(
         &st,
         &view,
         SimParams::default(),

@@ -236,7 +236,7 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
     }
     let report = result.with_context(|| kept(&recorder, patterns.len()))?;
     summarise(&report, camera.as_ref(), &recorder);
-    finish(args, &report, solver.as_ref(), t0.elapsed().as_secs_f64())
+    finish(args, &report, solver.as_mut(), t0.elapsed().as_secs_f64())
 }
 
 /// The display `--display` names when it is not a monitor: `offscreen` is
@@ -453,7 +453,7 @@ fn summarise(report: &Report, camera: &dyn Camera, recorder: &Recorder) {
 fn finish(
     args: &MeasureArgs,
     report: &Report,
-    solver: Option<&SpectralSolver>,
+    solver: Option<&mut SpectralSolver>,
     acquire_s: f64,
 ) -> anyhow::Result<()> {
     if report.interrupted {

@@ -116,7 +116,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let surfaces = (!args.surfaces.no_surfaces).then_some(&surface_opts);
     solve_and_write(
-        &solver,
+        &mut solver,
         &station,
         &args.out,
         t0.elapsed().as_secs_f64(),
@@ -129,7 +129,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
 /// summaries (`read_s`: seconds spent getting the frames). `mfd measure`
 /// calls this with its streamed solver.
 pub fn solve_and_write(
-    solver: &SpectralSolver,
+    solver: &mut SpectralSolver,
     station: &Station,
     out: &std::path::Path,
     read_s: f64,
