@@ -707,3 +707,37 @@ fn warm_starts_give_the_searched_answers() {
         assert!(differ * 200 <= a.maps.pixels.len(), "{differ} pixels");
     }
 }
+
+/// A prior traced by the caller and handed in gives the solver `new`
+/// builds (it traces the same flat plate); a prior of another camera is
+/// refused, naming both sizes.
+#[test]
+fn a_prior_handed_in_is_the_one_new_traces() {
+    let st = station(30.0);
+    let schedule = Schedule {
+        tau_stop: 60.0,
+        ..Schedule::default()
+    };
+    let frames = FrameInfo::from_patterns(&schedule.patterns());
+    let cfg = SpectralConfig::default();
+    let own = SpectralSolver::new(&st, &frames, cfg.clone()).unwrap();
+    let prior = mfd::solve::spectral::flat_plate_prior(&st, cfg.edge_margin_mm).unwrap();
+    let given = SpectralSolver::with_prior(&st, &frames, cfg.clone(), prior.clone()).unwrap();
+    assert_eq!(own.candidate_pixels(), given.candidate_pixels());
+    assert_eq!(own.series_bytes(), given.series_bytes());
+    let hits = |v: &TracedView| -> Vec<Option<[u64; 2]>> {
+        v.pixels
+            .iter()
+            .map(|p| p.front.ok().map(|h| [h.u.to_bits(), h.v.to_bits()]))
+            .collect()
+    };
+    assert!(hits(own.prior()) == hits(given.prior()));
+    let mut small = prior;
+    small.width -= 1;
+    small.pixels.truncate(small.width * small.height);
+    let err = SpectralSolver::with_prior(&st, &frames, cfg, small)
+        .err()
+        .expect("a prior of another camera is refused")
+        .to_string();
+    assert!(err.contains("geometry prior"), "{err}");
+}

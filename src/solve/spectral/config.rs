@@ -45,18 +45,23 @@ pub enum SpectralError {
         #[source]
         source: StatisticsError,
     },
-    /// A geometry prior handed in does not describe a camera image.
+    /// A geometry prior handed in does not describe this station's camera.
     #[error(
-        "geometry prior: {pixels} pixels for a {width}x{height} camera; trace it with \
-         TracedView::trace"
+        "geometry prior: {width}x{height} pixels ({pixels} traced) for a \
+         {camera_width}x{camera_height} camera; trace it through this station \
+         (spectral::flat_plate_prior)"
     )]
     Prior {
-        /// Pixels in the prior.
+        /// Pixels traced in the prior.
         pixels: usize,
         /// Its columns.
         width: usize,
         /// Its rows.
         height: usize,
+        /// The camera's columns.
+        camera_width: u32,
+        /// The camera's rows.
+        camera_height: u32,
     },
     /// Writing a map failed.
     #[error(transparent)]

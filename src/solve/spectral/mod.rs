@@ -12,14 +12,14 @@
 //! `σ̂² (JᵀJ)⁻¹` with `σ̂² = RSS/(N − p)`: the Cramér–Rao bound of the fitted
 //! model at the noise level the residuals show.
 //!
-//! The parts, in the order the data flow through them: [`config`]
-//! (settings and errors), [`prior`] (the flat plate traced through the
+//! The parts, in the order the data flow through them: `config`
+//! (settings and errors), `prior` (the flat plate traced through the
 //! nominal station: which pixels to fit, where their points should be),
-//! [`stream`] (frames in, kept as series or reduced to [`statistics`]),
-//! [`batch`] (the per-pixel fits and the backend seam they run behind),
+//! `stream` (frames in, kept as series or reduced to [`statistics`]),
+//! `batch` (the per-pixel fits and the backend seam they run behind),
 //! [`periodogram`] and [`pixel`] (one pixel's starting values and fits over
-//! the joint [`model`]), [`scene`] (the scene's number of reflections and
-//! every pixel's answer under it) and [`maps`] (the results and their
+//! the joint [`model`]), `scene` (the scene's number of reflections and
+//! every pixel's answer under it) and `maps` (the results and their
 //! files). [`bound`] is the Cramér–Rao bound of the schedule.
 
 mod batch;

@@ -74,7 +74,7 @@ impl SpectralSolver {
     ) -> Result<Self, SpectralError> {
         let design = design(station, frames)?;
         let prior = flat_plate_prior(station, config.edge_margin_mm)?;
-        Self::with_design(design, config, prior)
+        Self::with_design(station, design, config, prior)
     }
 
     /// Prepares for `frames` (capture order) of `station` with `prior`, the
@@ -84,7 +84,7 @@ impl SpectralSolver {
     /// # Errors
     /// [`SpectralError::Schedule`] when fewer than two non-parallel
     /// directions; [`SpectralError::Prior`] when `prior` does not hold one
-    /// entry per camera pixel; [`SpectralError::Config`] and
+    /// entry per pixel of the station's camera; [`SpectralError::Config`] and
     /// [`SpectralError::Statistics`] when the statistics engine cannot be
     /// built with these settings.
     pub fn with_prior(
@@ -94,19 +94,26 @@ impl SpectralSolver {
         prior: TracedView,
     ) -> Result<Self, SpectralError> {
         let design = design(station, frames)?;
-        Self::with_design(design, config, prior)
+        Self::with_design(station, design, config, prior)
     }
 
     fn with_design(
+        station: &Station,
         design: Design,
         config: SpectralConfig,
         view: TracedView,
     ) -> Result<Self, SpectralError> {
-        if view.pixels.len() != view.width * view.height {
+        let camera = &station.camera;
+        if view.pixels.len() != view.width * view.height
+            || view.width != camera.width as usize
+            || view.height != camera.height as usize
+        {
             return Err(SpectralError::Prior {
                 pixels: view.pixels.len(),
                 width: view.width,
                 height: view.height,
+                camera_width: camera.width,
+                camera_height: camera.height,
             });
         }
         let plans = SpectrumPlans::new(&design);

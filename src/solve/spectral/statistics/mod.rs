@@ -28,11 +28,11 @@
 //! station's prediction is flagged [`super::flags::OUT_OF_BAND`], never
 //! fitted with a wrong model.
 //!
-//! The parts: [`nodes`] (Chebyshev nodes and how many), [`tables`] (the
-//! schedule's tables per direction), [`ingest`] (frames in, with the
-//! clipping policy), [`samples`] (one pixel's statistics: normal equations
-//! and linear fits), [`sums`] (the columns' inner products they are made
-//! of), [`scan`] (periodogram peak and pair scan) and [`simd`] (the hot
+//! The parts: `nodes` (Chebyshev nodes and how many), `tables` (the
+//! schedule's tables per direction), `ingest` (frames in, with the
+//! clipping policy), `samples` (one pixel's statistics: normal equations
+//! and linear fits), `sums` (the columns' inner products they are made
+//! of), `scan` (periodogram peak and pair scan) and `simd` (the hot
 //! loops' AVX2/FMA dispatch).
 
 mod ingest;

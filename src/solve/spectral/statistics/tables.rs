@@ -171,20 +171,7 @@ impl DirTables {
             &card_gram,
             (qd, qg),
         );
-        let hann = |t: f64| {
-            let x = std::f64::consts::PI * (t - lo) * bin;
-            x.sin().powi(2)
-        };
-        let w2 = taus.iter().map(|&t| hann(t).powi(2)).sum();
-        let nk = (band / (0.25 * bin)).floor() as i64;
-        let pdelta: Vec<f64> = (-nk..=nk).map(|k| k as f64 * 0.25 * bin).collect();
-        let mut pw = Vec::with_capacity(pdelta.len() * qd);
-        for &dl in &pdelta {
-            for &t in &data.tau {
-                let (c, s) = sincos_cycles(dl * t);
-                pw.push(C64::new(c, s) * hann(t));
-            }
-        }
+        let (pdelta, pw, w2) = periodogram_weights(&taus, &data.tau, lo, bin, band);
         Ok(DirTables {
             data,
             gram,
@@ -207,6 +194,34 @@ impl DirTables {
             w2,
         })
     }
+}
+
+/// The periodogram over the band on the data nodes `nodes`: the offsets δ
+/// (¼ bin apart within `band`, μ), `w(τ_j) e^{2πiδτ_j}` per offset and
+/// node, w the Hann window over the direction's `taus` (from `lo`, one
+/// Fourier bin `bin`), and `Σ_i w(τ_i)²`.
+fn periodogram_weights(
+    taus: &[f64],
+    nodes: &[f64],
+    lo: f64,
+    bin: f64,
+    band: f64,
+) -> (Vec<f64>, Vec<C64>, f64) {
+    let hann = |t: f64| {
+        let x = std::f64::consts::PI * (t - lo) * bin;
+        x.sin().powi(2)
+    };
+    let w2 = taus.iter().map(|&t| hann(t).powi(2)).sum();
+    let nk = (band / (0.25 * bin)).floor() as i64;
+    let pdelta: Vec<f64> = (-nk..=nk).map(|k| k as f64 * 0.25 * bin).collect();
+    let mut pw = Vec::with_capacity(pdelta.len() * nodes.len());
+    for &dl in &pdelta {
+        for &t in nodes {
+            let (c, s) = sincos_cycles(dl * t);
+            pw.push(C64::new(c, s) * hann(t));
+        }
+    }
+    (pdelta, pw, w2)
 }
 
 /// The schedule sums `Σ_i e^{iθ_i(μ_g)} L_j(τ_i)` (data and product nodes)
