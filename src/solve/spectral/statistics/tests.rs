@@ -86,14 +86,14 @@ fn statistics_reproduce_the_series_normal_equations() {
         stats.ingest(r * STATS_BLOCK, chunk.len(), chunk);
     }
     stats.seal();
-    let (compact, excluded) = stats.samples(&design, 0, Some(4095)).unwrap();
+    let (statistics, excluded) = stats.samples(&design, 0, Some(4095)).unwrap();
     let y: Vec<f64> = raw
         .iter()
         .map(|&v| if v >= 4095 { f64::NAN } else { f64::from(v) })
         .collect();
     let series = SeriesSamples::new(&design, &plans, &y, k0);
     assert_eq!(excluded, raw.iter().filter(|&&v| v >= 4095).count());
-    assert_eq!(compact.count(), series.count());
+    assert_eq!(statistics.count(), series.count());
     let mut off = t;
     off.uv[0][0] += 3.0;
     off.uv[1][1] -= 2.0;
@@ -103,7 +103,7 @@ fn statistics_reproduce_the_series_normal_equations() {
     one.k = 1;
     for p in [t, off, one] {
         let a = series.normal(&p);
-        let b = compact.normal(&p);
+        let b = statistics.normal(&p);
         let scale = a.jtj.abs().max();
         assert!(
             (a.rss - b.rss).abs() <= 1e-8 * a.rss,
@@ -128,7 +128,7 @@ fn statistics_reproduce_the_series_normal_equations() {
         );
         for dir in [None, Some(0), Some(1)] {
             let (pa, ra) = series.linear(&p, dir);
-            let (pb, rb) = compact.linear(&p, dir);
+            let (pb, rb) = statistics.linear(&p, dir);
             assert!(
                 (ra - rb).abs() <= 1e-8 * ra.max(1.0),
                 "{dir:?}: {ra} vs {rb}"
@@ -144,7 +144,7 @@ fn statistics_reproduce_the_series_normal_equations() {
         let off = ax.s(t.uv[1][0], t.uv[1][1]) - mu;
         let args = [mu - 1.25 * off, 0.125 * off, off];
         let a = series.pair_scan(d, args, 13, k0, &point);
-        let b = compact.pair_scan(d, args, 13, k0, &point);
+        let b = statistics.pair_scan(d, args, 13, k0, &point);
         for ((aa, ra), (ab, rb)) in a.iter().zip(&b) {
             assert!((ra - rb).abs() <= 1e-8 * ra, "{d}: {ra} vs {rb}");
             assert!((aa[0] - ab[0]).abs() < 1e-6 && (aa[1] - ab[1]).abs() < 1e-6);
@@ -161,7 +161,7 @@ fn statistics_reproduce_the_series_normal_equations() {
     assert!(tight.samples(&design, 0, Some(4095)).is_none());
     for d in 0..2 {
         let (ma, _) = series.peak(d).unwrap();
-        let (mb, rb) = compact.peak(d).unwrap();
+        let (mb, rb) = statistics.peak(d).unwrap();
         assert!((ma - mb).abs() < 0.3 / 199.8, "{d}: {ma} vs {mb}");
         // Far above the detection threshold (a strong, clean signal).
         assert!(rb > 100.0, "{rb}");
