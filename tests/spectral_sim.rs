@@ -86,7 +86,7 @@ fn run_patterns(
         .draw_pair(25.5, [0.0, 0.0], 21)
         .unwrap();
     let view = TracedView::trace(station, &Plate::new(station, front, back, 3.0));
-    let (solver, cam) = fed_solver(station, &view, params.clone(), patterns, config);
+    let (mut solver, cam) = fed_solver(station, &view, params.clone(), patterns, config);
     let frames: Vec<_> = FrameInfo::from_patterns(patterns);
     let maps = solver.solve().unwrap();
     // The bound of the same joint model at the truth (A, B from the Fresnel
@@ -435,8 +435,8 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts(engine: Engi
 struct Reversed(std::sync::atomic::AtomicUsize);
 
 impl FitBackend for Reversed {
-    fn fit(&self, batch: &FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
-        let n = batch.candidates.len();
+    fn fit(&self, batch: &mut FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
+        let n = batch.candidates().len();
         self.0.store(n, std::sync::atomic::Ordering::Relaxed);
         let mut runs: Vec<_> = batch
             .runs()
@@ -453,7 +453,7 @@ impl FitBackend for Reversed {
 struct Empty;
 
 impl FitBackend for Empty {
-    fn fit(&self, _: &FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
+    fn fit(&self, _: &mut FitBatch) -> Vec<mfd::solve::spectral::pixel::PixelFits> {
         Vec::new()
     }
 }
@@ -467,7 +467,7 @@ fn the_fit_backend_seam_takes_every_candidate_and_is_checked() {
         ..Schedule::default()
     };
     let view = TracedView::trace(&st, &Plate::new(&st, flat(&st), flat(&st), 3.0));
-    let (solver, _) = fed_solver(
+    let (mut solver, _) = fed_solver(
         &st,
         &view,
         SimParams::default(),
@@ -706,4 +706,38 @@ fn warm_starts_give_the_searched_answers() {
         assert!(worst_sd <= 0.01, "σ differs by {worst_sd}");
         assert!(differ * 200 <= a.maps.pixels.len(), "{differ} pixels");
     }
+}
+
+/// A prior traced by the caller and handed in gives the solver `new`
+/// builds (it traces the same flat plate); a prior of another camera is
+/// refused, naming both sizes.
+#[test]
+fn a_prior_handed_in_is_the_one_new_traces() {
+    let st = station(30.0);
+    let schedule = Schedule {
+        tau_stop: 60.0,
+        ..Schedule::default()
+    };
+    let frames = FrameInfo::from_patterns(&schedule.patterns());
+    let cfg = SpectralConfig::default();
+    let own = SpectralSolver::new(&st, &frames, cfg.clone()).unwrap();
+    let prior = mfd::solve::spectral::flat_plate_prior(&st, cfg.edge_margin_mm).unwrap();
+    let given = SpectralSolver::with_prior(&st, &frames, cfg.clone(), prior.clone()).unwrap();
+    assert_eq!(own.candidate_pixels(), given.candidate_pixels());
+    assert_eq!(own.series_bytes(), given.series_bytes());
+    let hits = |v: &TracedView| -> Vec<Option<[u64; 2]>> {
+        v.pixels
+            .iter()
+            .map(|p| p.front.ok().map(|h| [h.u.to_bits(), h.v.to_bits()]))
+            .collect()
+    };
+    assert!(hits(own.prior()) == hits(given.prior()));
+    let mut small = prior;
+    small.width -= 1;
+    small.pixels.truncate(small.width * small.height);
+    let err = SpectralSolver::with_prior(&st, &frames, cfg, small)
+        .err()
+        .expect("a prior of another camera is refused")
+        .to_string();
+    assert!(err.contains("geometry prior"), "{err}");
 }

@@ -11,18 +11,35 @@
 //! `BIC = N ln(RSS/N) + p ln N` picks the model. Uncertainties are
 //! `σ̂² (JᵀJ)⁻¹` with `σ̂² = RSS/(N − p)`: the Cramér–Rao bound of the fitted
 //! model at the noise level the residuals show.
+//!
+//! The parts, in the order the data flow through them: `config`
+//! (settings and errors), `prior` (the flat plate traced through the
+//! nominal station: which pixels to fit, where their points should be),
+//! `stream` (frames in, kept as series or reduced to [`statistics`]),
+//! `batch` (the per-pixel fits and the backend seam they run behind),
+//! [`periodogram`] and [`pixel`] (one pixel's starting values and fits over
+//! the joint [`model`]), `scene` (the scene's number of reflections and
+//! every pixel's answer under it) and `maps` (the results and their
+//! files). [`bound`] is the Cramér–Rao bound of the schedule.
 
+mod batch;
 pub mod bound;
-pub mod compact;
-pub mod init;
+mod config;
+mod maps;
 pub mod model;
+pub mod periodogram;
 pub mod pixel;
-mod solver;
+mod prior;
+mod scene;
+pub mod statistics;
+mod stream;
 
-pub use solver::{
-    CpuFits, Engine, FitBackend, FitBatch, SpectralConfig, SpectralError, SpectralMaps,
-    SpectralSolver, SERIES_LIMIT_BYTES,
-};
+pub use batch::{CpuFits, FitBackend, FitBatch};
+pub use config::{Engine, SpectralConfig, SpectralError, SERIES_LIMIT_BYTES};
+pub use maps::SpectralMaps;
+pub use prior::flat_plate_prior;
+pub use statistics::StatisticsError;
+pub use stream::SpectralSolver;
 
 use nalgebra::DMatrix;
 

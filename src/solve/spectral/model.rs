@@ -180,7 +180,7 @@ fn normal_fixed<const N: usize>(design: &Design, index: &[u32], y: &[f64], p: &P
 
 /// A pixel's samples as the fits see them: the series itself
 /// ([`SeriesSamples`]) or its sufficient statistics
-/// ([`super::compact::CompactSamples`]). Both give the same least squares.
+/// ([`super::statistics::StatisticsSamples`]). Both give the same least squares.
 pub trait Samples {
     /// Samples used.
     fn count(&self) -> usize;
@@ -238,7 +238,7 @@ pub trait Samples {
 /// The series of one pixel: used frames `index` with values `y`.
 pub struct SeriesSamples<'a> {
     design: &'a Design,
-    plans: &'a super::init::SpectrumPlans,
+    plans: &'a super::periodogram::SpectrumPlans,
     index: Vec<u32>,
     y: Vec<f64>,
     y_by_frame: &'a [f64],
@@ -252,7 +252,7 @@ impl<'a> SeriesSamples<'a> {
     /// envelopes are kept for `kappa0`, the κ the starting scans use.
     pub fn new(
         design: &'a Design,
-        plans: &'a super::init::SpectrumPlans,
+        plans: &'a super::periodogram::SpectrumPlans,
         y_by_frame: &'a [f64],
         kappa0: f64,
     ) -> Self {

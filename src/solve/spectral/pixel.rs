@@ -6,11 +6,11 @@
 
 use nalgebra::DMatrix;
 
-use super::init::SpectrumPlans;
 use super::model::{
     gauss_newton_step, levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples,
     SmallCholesky, MAX_REFLECTIONS,
 };
+use super::periodogram::SpectrumPlans;
 use super::{flags, PixelResult};
 use crate::optics::trace::PixelPaths;
 

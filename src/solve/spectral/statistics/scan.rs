@@ -1,0 +1,178 @@
+//! The searches over a pixel's band: the periodogram's strongest peak and
+//! the scan of front/back pairs along one direction, both from the sums.
+
+use super::samples::StatisticsSamples;
+use super::{C64, GRID_BINS};
+use crate::kernels::{exp_fast, sincos_cycles};
+use crate::solve::spectral::periodogram::refine_peak;
+
+impl StatisticsSamples<'_> {
+    /// The strongest periodogram peak of direction `d` within the band,
+    /// refined, with its power over the noise's median ([`Samples::peak`](crate::solve::spectral::model::Samples::peak)).
+    pub(super) fn band_peak(&self, d: usize) -> Option<(f64, f64)> {
+        let pd = &self.dirs[d];
+        let t = &self.tables.dirs[d];
+        if pd.n < 8.0 {
+            return None;
+        }
+        let mean = pd.sy / pd.n;
+        let var = pd.syy / pd.n - mean * mean;
+        let mean = mean + self.y0;
+        // Counts are integers: no variance below the rounding's 1/12 count²
+        // (also keeps Σy²/n − ȳ²'s cancellation on a constant pixel from
+        // passing for a signal).
+        let var = var.max(1.0 / 12.0);
+        let zc: Vec<C64> =
+            pd.z.iter()
+                .zip(pd.ez_data.iter())
+                .map(|(z, e)| z - e * mean)
+                .collect();
+        let q = zc.len();
+        let power: Vec<f64> =
+            t.pw.chunks_exact(q)
+                .map(|w| {
+                    w.iter()
+                        .zip(&zc)
+                        .map(|(a, b)| a * b)
+                        .sum::<C64>()
+                        .norm_sqr()
+                })
+                .collect();
+        let mus: Vec<f64> = t.pdelta.iter().map(|dl| pd.mu_c + dl).collect();
+        let (k, _) = power.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
+        // Pure noise of variance σ² has periodogram power with mean
+        // σ² Σ w², median ln 2 of that: the ratio is on the scale of
+        // [`super::pixel::DETECTION_RATIO`].
+        let ratio = power[k] / (std::f64::consts::LN_2 * var * t.w2);
+        if k == 0 || k + 1 == power.len() {
+            // The strongest power is at the band's edge: the signal may lie
+            // outside it.
+            return Some((f64::NAN, ratio));
+        }
+        let (mu, _) = refine_peak(&mus, &power, 3.0 * t.bin)?;
+        Some((mu, ratio))
+    }
+
+    /// The linear fits of `count` front/back pairs along direction `dir`
+    /// ([`Samples::pair_scan`](crate::solve::spectral::model::Samples::pair_scan)): the pairs' columns at node τ are
+    /// `a0 = e ρ0 r^k`, `a1 = a0 o`, with `e = e^{−κτ²}`,
+    /// `ρ0 = e^{2πi(μ0 − μc)τ}`, `r = e^{2πi·step·τ}`,
+    /// `o = e^{2πi·offset·τ}`: one complex product per pair and node
+    /// instead of two sine–cosines and an exponential. The M part of the
+    /// products is the same for every pair: `½Σ M e²` (|a|²) and
+    /// `½Σ M e² cos(2π·offset·τ)` (Re a0 ā1).
+    pub(super) fn band_pair_scan(
+        &self,
+        dir: usize,
+        [mu0, step, offset]: [f64; 3],
+        count: usize,
+        kappa: f64,
+    ) -> Vec<([f64; 2], f64)> {
+        let pd = &self.dirs[dir];
+        let t = &self.tables.dirs[dir];
+        let [klo, khi] = self.tables.kappa_range;
+        let lim = t.band + 0.5 * GRID_BINS * t.bin;
+        let mut gram: Vec<PairNode> = t
+            .gram
+            .tau
+            .iter()
+            .map(|&tau| PairNode::new(tau, kappa, [mu0 - pd.mu_c, step, offset]))
+            .collect();
+        let (mut m00, mut m01) = (0.0, 0.0);
+        for (j, nd) in gram.iter().enumerate() {
+            let e2 = nd.cur.norm_sqr();
+            m00 += pd.hm[j] * e2;
+            m01 += pd.hm[j] * e2 * nd.off.re;
+        }
+        let mut out = Vec::with_capacity(count);
+        for k in 0..count {
+            let m0 = mu0 + k as f64 * step - pd.mu_c;
+            let inside =
+                kappa >= klo && kappa <= khi && m0.abs() <= lim && (m0 + offset).abs() <= lim;
+            let sums = self.pair_sums(dir, &mut gram, [m00, m01]);
+            out.push(if inside {
+                self.pair_fit(dir, &sums)
+            } else {
+                ([0.0; 2], f64::INFINITY)
+            });
+        }
+        out
+    }
+
+    /// The sums of the current pair over the product nodes — `[e0, e1,
+    /// g00, g01, g11, y0, y1]`: constant, products and data with its two
+    /// columns, `m` the shared M parts — with every node then stepped to
+    /// the next pair.
+    fn pair_sums(&self, dir: usize, gram: &mut [PairNode], [m00, m01]: [f64; 2]) -> [f64; 7] {
+        let pd = &self.dirs[dir];
+        let (mut e0, mut e1, mut g00, mut g01, mut g11) = (0.0, 0.0, m00, m01, m00);
+        let (mut y0, mut y1) = (0.0, 0.0);
+        for (j, nd) in gram.iter_mut().enumerate() {
+            let a0 = nd.cur;
+            let a1 = a0 * nd.off;
+            let ez = C64::new(pd.ez_re[j], pd.ez_im[j]);
+            e0 += (ez * a0).re;
+            e1 += (ez * a1).re;
+            let z = C64::new(pd.zg_re[j], pd.zg_im[j]);
+            y0 += (z * a0).re;
+            y1 += (z * a1).re;
+            let w = C64::new(pd.hd_re[j], pd.hd_im[j]) * nd.cur2;
+            let wo = w * nd.off;
+            g00 += w.re;
+            g01 += wo.re;
+            g11 += (wo * nd.off).re;
+            nd.cur *= nd.rot;
+            nd.cur2 *= nd.rot2;
+        }
+        [e0, e1, g00, g01, g11, y0, y1]
+    }
+
+    /// The pair's linear fit (offset and two amplitudes) from its sums
+    /// ([`Self::pair_sums`]): the amplitudes and the RSS.
+    fn pair_fit(&self, dir: usize, &[e0, e1, g00, g01, g11, y0, y1]: &[f64; 7]) -> ([f64; 2], f64) {
+        let pd = &self.dirs[dir];
+        let g = nalgebra::Matrix3::new(pd.n, e0, e1, e0, g00, g01, e1, g01, g11);
+        let h = nalgebra::Vector3::new(pd.sy, y0 - self.y0 * e0, y1 - self.y0 * e1);
+        match g.cholesky() {
+            Some(c) => {
+                let b = c.solve(&h);
+                ([b[1], b[2]], (pd.syy - h.dot(&b)).max(0.0))
+            }
+            None => ([0.0; 2], f64::INFINITY),
+        }
+    }
+}
+
+/// One product node of the pair scan: the current pair's front column
+/// (`cur`) and its square, the steps to the next pair, and the back
+/// column's factor `o`.
+struct PairNode {
+    cur: C64,
+    cur2: C64,
+    rot: C64,
+    rot2: C64,
+    off: C64,
+}
+
+impl PairNode {
+    /// At node `tau`, for `[μ0 − μc, step, offset]`.
+    fn new(tau: f64, kappa: f64, [start, step, offset]: [f64; 3]) -> Self {
+        let e = exp_fast(-kappa * tau * tau);
+        let off = cis(offset * tau);
+        let cur = cis(start * tau) * e;
+        let rot = cis(step * tau);
+        PairNode {
+            cur,
+            cur2: cur * cur,
+            rot,
+            rot2: rot * rot,
+            off,
+        }
+    }
+}
+
+/// `e^{2πix}`.
+fn cis(x: f64) -> C64 {
+    let (c, s) = sincos_cycles(x);
+    C64::new(c, s)
+}
