@@ -193,7 +193,8 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
     for (args, needle) in [
         (
             vec!["--engine", "fast"],
-            "--engine: expected auto, series or statistics",
+            // clap's `ValueEnum` names the option and the values it takes.
+            "invalid value 'fast' for '--engine <ENGINE>'\n  [possible values: auto, series, statistics]",
         ),
         (
             vec!["--engine", "statistics", "--band-bins", "0"],

@@ -205,9 +205,7 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
             overwrite: args.overwrite,
         }
     };
-    let solver = (!args.no_reconstruct)
-        .then(|| args.spectral.config())
-        .transpose()?;
+    let solver = (!args.no_reconstruct).then(|| args.spectral.config());
     let sequencer = SequencerConfig {
         frame_timeout: Duration::from_millis(args.frame_timeout_ms),
         max_reshoots: args.max_reshoots,

@@ -18,6 +18,7 @@ use anyhow::Context;
 use mfd::formats::surfaces_file::SurfacesFile;
 use mfd::optics::station::Station;
 use mfd::optics::zernike::ZernikeSurface;
+use mfd::solve::spectral::Engine;
 
 /// Front and back surfaces from a `surfaces.json`, or flat surfaces over the
 /// station's aperture when none is given. A `null` surface is flat.
@@ -51,8 +52,8 @@ pub struct SpectralArgs {
     /// screen), statistics (~1.5 kB per pixel whatever the frame count,
     /// points within --band-bins of the station's prediction), or auto
     /// (statistics when the series would exceed 2 GiB).
-    #[arg(long, default_value = "auto")]
-    engine: String,
+    #[arg(long, value_enum, default_value_t = Engine::Auto, hide_possible_values = true)]
+    engine: Engine,
     /// Statistics engine: how many Fourier bins beyond the predicted screen
     /// points (per direction) the kept band reaches.
     #[arg(long, default_value_t = 3.0)]
@@ -67,27 +68,13 @@ pub struct SpectralArgs {
 
 impl SpectralArgs {
     /// The default configuration with these options.
-    ///
-    /// # Errors
-    /// An unknown `--engine`.
-    pub fn config(&self) -> anyhow::Result<mfd::solve::spectral::SpectralConfig> {
-        Ok(mfd::solve::spectral::SpectralConfig {
-            engine: parse_engine(&self.engine)?,
+    pub fn config(&self) -> mfd::solve::spectral::SpectralConfig {
+        mfd::solve::spectral::SpectralConfig {
+            engine: self.engine,
             band_bins: self.band_bins,
             warm_starts: !self.search_every_pixel,
             ..mfd::solve::spectral::SpectralConfig::default()
-        })
-    }
-}
-
-/// The spectral engine named on the command line (`--engine`).
-pub fn parse_engine(name: &str) -> anyhow::Result<mfd::solve::spectral::Engine> {
-    use mfd::solve::spectral::Engine;
-    match name {
-        "auto" => Ok(Engine::Auto),
-        "series" => Ok(Engine::Series),
-        "statistics" | "stats" => Ok(Engine::Statistics),
-        other => anyhow::bail!("--engine: expected auto, series or statistics, found {other:?}"),
+        }
     }
 }
 

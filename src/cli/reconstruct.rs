@@ -95,7 +95,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
             margin_px: args.margin_px,
             edge_margin_mm: args.edge_margin_mm,
             roi: args.roi.as_ref().map(|r| [r[0], r[1], r[2], r[3]]),
-            ..args.spectral.config()?
+            ..args.spectral.config()
         },
         surfaces,
     };

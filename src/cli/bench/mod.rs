@@ -65,8 +65,8 @@ struct SpectralBenchArgs {
     #[arg(long, default_value_t = 0.05)]
     noise: f64,
     /// How the solver keeps the pixels' data: auto, series or statistics.
-    #[arg(long, default_value = "statistics")]
-    engine: String,
+    #[arg(long, value_enum, default_value_t = mfd::solve::spectral::Engine::Statistics, hide_possible_values = true)]
+    engine: mfd::solve::spectral::Engine,
     /// Search every pixel's fits from its spectrum, instead of starting
     /// each from its row neighbour's where that one found both points (the
     /// same answers within 0.03σ, 3–4× slower; for scenes with many
@@ -122,7 +122,7 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     });
     let config = SpectralConfig {
         roi,
-        engine: crate::cli::parse_engine(&args.engine)?,
+        engine: args.engine,
         warm_starts: !args.search_every_pixel,
         ..SpectralConfig::default()
     };

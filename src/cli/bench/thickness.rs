@@ -24,8 +24,8 @@ pub struct TableArgs {
     #[arg(long, default_value_t = 0.05)]
     noise: f64,
     /// Spectral engine: auto, series or statistics.
-    #[arg(long, default_value = "auto")]
-    engine: String,
+    #[arg(long, value_enum, default_value_t = mfd::solve::spectral::Engine::Auto, hide_possible_values = true)]
+    engine: mfd::solve::spectral::Engine,
     /// Print a markdown table instead of one JSON line per row.
     #[arg(long)]
     markdown: bool,
@@ -49,7 +49,7 @@ pub fn run(args: &TableArgs) -> anyhow::Result<()> {
     );
         println!("|---|---|---|---|---|---|---|---|---|");
     }
-    let engine = crate::cli::parse_engine(&args.engine)?;
+    let engine = args.engine;
     for &n in &args.index {
         for &t in &args.thickness_mm {
             row(t, n, args.noise, engine, args.markdown)?;

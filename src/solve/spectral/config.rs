@@ -16,6 +16,14 @@ pub enum SpectralError {
         /// What is wrong.
         problem: String,
     },
+    /// The station's aperture admits no surface (radius not positive or not
+    /// finite), so no geometry prior can be traced.
+    #[error("the element's aperture: {source}")]
+    Aperture {
+        /// The Zernike basis's refusal.
+        #[source]
+        source: crate::optics::zernike::ZernikeError,
+    },
     /// A setting is out of range.
     #[error("spectral setting {field}: {problem}")]
     Config {
@@ -68,8 +76,9 @@ pub enum SpectralError {
     Npy(#[from] NpyError),
 }
 
-/// How the solver keeps the pixels' data between frames and fit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How the solver keeps the pixels' data between frames and fit (also the
+/// command line's `--engine`: `auto`, `series`, `statistics` or `stats`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Engine {
     /// Statistics when the series would exceed [`SERIES_LIMIT_BYTES`], else series.
     #[default]
@@ -78,6 +87,7 @@ pub enum Engine {
     Series,
     /// Per-pixel sufficient statistics ([`super::statistics`]): fixed memory per
     /// pixel, fits within a band around the station's prediction.
+    #[value(alias = "stats")]
     Statistics,
 }
 

@@ -27,9 +27,7 @@ pub fn flat_plate_prior(
         e.aperture_radius_mm,
         [e.aperture_center_mm.x, e.aperture_center_mm.y],
     )
-    .map_err(|err| SpectralError::Schedule {
-        problem: err.to_string(),
-    })?;
+    .map_err(|source| SpectralError::Aperture { source })?;
     let plate = Plate::new(station, flat.clone(), flat, edge_margin_mm);
     Ok(TracedView::trace(station, &plate))
 }
