@@ -41,9 +41,9 @@ impl<const N: usize> SmallCholesky<N> {
             let rj = 1.0 / dj;
             l[j][j] = dj;
             inv_diag[j] = rj;
-            for i in j + 1..n {
-                let dot: f64 = l[i][..j].iter().zip(&lj[..j]).map(|(x, y)| x * y).sum();
-                l[i][j] = (a(i, j) - dot) * rj;
+            for (i, li) in l.iter_mut().enumerate().take(n).skip(j + 1) {
+                let dot: f64 = li[..j].iter().zip(&lj[..j]).map(|(x, y)| x * y).sum();
+                li[j] = (a(i, j) - dot) * rj;
             }
         }
         Some(SmallCholesky { n, l, inv_diag })

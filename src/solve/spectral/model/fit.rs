@@ -59,7 +59,7 @@ const RSS_TOL: f64 = 1e-11;
 const CHI2_TOL: f64 = 1e-3;
 
 /// Most parameters of a model (three reflections).
-pub(crate) const MAX_PARAMS: usize = 3 * MAX_REFLECTIONS + 2;
+const MAX_PARAMS: usize = 3 * MAX_REFLECTIONS + 2;
 
 /// The Cholesky factorisation of a model's JᵀJ, on the stack.
 pub(crate) type ParamCholesky = SmallCholesky<MAX_PARAMS>;
