@@ -4,15 +4,23 @@
 //! criterion, labels from physics, and uncertainties from the Fisher
 //! information at the residuals' noise level.
 
+use std::cell::OnceCell;
+
 use nalgebra::DMatrix;
 
 use super::model::{
-    gauss_newton_step, levenberg_marquardt, Design, Fit, Params, Samples, SeriesSamples,
-    SmallCholesky, MAX_REFLECTIONS,
+    levenberg_marquardt, Design, Fit, ParamCholesky, Params, Samples, MAX_REFLECTIONS,
 };
 use super::periodogram::SpectrumPlans;
 use super::{flags, PixelResult};
 use crate::optics::trace::PixelPaths;
+
+mod finalize;
+mod warm;
+
+use finalize::finalize;
+pub use warm::Seed;
+use warm::{warm_fits, UNIT_SD_REUSE};
 
 /// Peak-to-median power below which a direction carries no fringe signal.
 /// For pure noise the periodogram's maximum over ~10³ bins sits ~10× the
@@ -131,7 +139,7 @@ struct Candidate {
 /// The inverse of a symmetric positive definite matrix (Cholesky), or of
 /// any invertible one (LU) when it is not.
 fn spd_inverse(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    match SmallCholesky::new(m) {
+    match ParamCholesky::new(m) {
         Some(c) => Some(c.inverse()),
         None => m.clone().try_inverse(),
     }
@@ -207,86 +215,19 @@ impl PixelFits {
     }
 }
 
-/// Fits one pixel with one, two and (when allowed) three reflections. `y`
-/// is indexed by frame, NaN where a sample is excluded.
-pub fn fit_pixel(ctx: &PixelContext, y_by_frame: &[f64], excluded: usize) -> PixelFits {
-    let data = SeriesSamples::new(ctx.design, ctx.plans, y_by_frame, ctx.kappa0);
-    fit_samples(ctx, &data, excluded)
-}
-
-/// [`fit_pixel`] on any form of the pixel's samples.
-pub fn fit_samples<S: Samples + ?Sized>(
-    ctx: &PixelContext,
-    data: &S,
-    excluded: usize,
-) -> PixelFits {
-    let mut out = PixelFits::none();
-    fit_samples_seeded(ctx, data, excluded, None, &mut out);
-    out
-}
-
-/// What a pixel whose two reflections were found hands the next pixel of
-/// its camera row: its two-reflection fit (front first) and the station's
-/// prediction there, so that the neighbour's fit starts where this pixel's
-/// ended, moved by the prediction's change.
-#[derive(Debug, Clone, Copy)]
-pub struct Seed {
-    two: Params,
-    front: [f64; 2],
-    back: [f64; 2],
-    /// The two-reflection fit's noise variance, counts².
-    sigma2: f64,
-    /// The last separability σ at unit noise computed along the row, the
-    /// merged amplitude it was computed at, and pixels since.
-    unit_sd: Option<(f64, f64, u32)>,
-}
-
-/// A warm pixel may reuse the separability σ of a pixel at most this many
-/// places before it in its row (then it is computed again).
-const UNIT_SD_REUSE: u32 = 32;
-
-/// The warm path accepts a pixel's fits only if its noise variance is within
-/// this factor of the seed's. Adjacent pixels see nearly the same intensity,
-/// so their read and shot noise agree to a few percent (the variance
-/// estimate itself scatters by √(2/N) ≈ 3 % at N = 2000); a fit in a wrong
-/// basin leaves the misfit in its residuals and fails this.
-const WARM_NOISE_RATIO: f64 = 1.2;
-
-/// A warm pixel's amplitudes and falloff κ must lie within this fraction of
-/// its neighbour's: they follow the illumination and the optics, smooth
-/// across one camera pixel, and a 10σ amplitude carries ≤ 10 % of noise
-/// (typically ~1 %). Where they jump, the data do not follow the smooth
-/// scene the warm start assumes, and the pixel is searched.
-const WARM_CHANGE: f64 = 0.2;
-
-/// Each warm amplitude must exceed this many of its standard deviations.
-/// That is far above detection (a periodogram peak [`DETECTION_RATIO`]
-/// times the median corresponds to ~6σ), so skipping the periodogram skips
-/// nothing; and it decides one against two reflections more strictly than
-/// the BIC, whose penalty for the second reflection's three parameters,
-/// 3 ln N ≈ 23 at N = 2000, is met by a Wald statistic z² = 23 (z ≈ 4.8):
-/// where the weaker amplitude is ≥ 10σ, the one-reflection fit is not needed.
-const WARM_AMPLITUDE_SIGMAS: f64 = 10.0;
-
-/// The warm pair's second Gauss–Newton step is taken without evaluating
-/// its end point where it is predicted to lower χ² by less than this: a
-/// step of ≤ √0.1 ≈ 0.3σ, which lands to second order in it (the points
-/// within 0.03σ of the searched fit's, `tests/spectral_sim.rs`); RSS is
-/// then the predicted one and JᵀJ the start's, whose σ differs by ≤ 0.7 %
-/// there (2 % for steps up to 1σ, hence not more).
-const ONE_STEP_CHI2: f64 = 0.1;
-
-/// [`fit_samples`], starting from a neighbour's fits when `seed` is given,
+/// Fits one pixel with one, two and (when allowed) three reflections, on
+/// any form of its samples (`excluded` of them left out as saturated),
+/// starting from a neighbour's fits when `seed` is given,
 /// moved by the change of the station's prediction: one evaluated
 /// Gauss–Newton step for the pair and a second one taken unevaluated where
-/// it is small ([`ONE_STEP_CHI2`]; LM from there otherwise) — 2 evaluations
+/// it is small ([`warm::ONE_STEP_CHI2`]; LM from there otherwise) — 2 evaluations
 /// instead of the ~15 and two pair scans of the search from the spectrum.
 /// The warm fit is kept only where the search would have ended in the same
 /// place: both amplitudes far above detection and above what the BIC asks
-/// of a second reflection ([`WARM_AMPLITUDE_SIGMAS`]; the one-reflection
+/// of a second reflection ([`warm::WARM_AMPLITUDE_SIGMAS`]; the one-reflection
 /// model is then not fitted, its BIC for the scene's sums taken from the
 /// Wald statistic: [`PixelFits::one_bic`]) and the noise level the
-/// neighbour's ([`WARM_NOISE_RATIO`]);
+/// neighbour's ([`warm::WARM_NOISE_RATIO`]);
 /// otherwise the pixel is searched from scratch. Writes the fits to `out`
 /// (in place: they are ~1 kB) and returns, where both points were found,
 /// the seed for the next pixel.
@@ -319,9 +260,33 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             None => return None,
         },
     };
-    // The pixel's signal as one reflection: the one-reflection fit, or on a
-    // warm pixel the pair's amplitude-weighted centre and total amplitude.
-    let merged = match (&one, &two) {
+    let merged = merged_signal(one.as_ref(), two.as_ref());
+    let n = data.count();
+    let next = two
+        .as_ref()
+        .and_then(|two| Seed::from_fit(ctx, &two.fit, n));
+    let unit_sd = OnceCell::new();
+    let worst = [one.as_ref(), two.as_ref()]
+        .into_iter()
+        .flatten()
+        .map(|c| c.fit.sigma2(n))
+        .fold(0.0, f64::max);
+    let carried = reused_unit_sd(reuse, d12, &merged, worst, &unit_sd);
+    for (k, cand) in [one, two, three].into_iter().enumerate() {
+        out.per_model[k] = cand.map(|c| Scored {
+            result: finalize(ctx, &c, data, d12, &merged, &unit_sd, out.base),
+            bic: c.bic,
+        });
+    }
+    let unit_sd = carried.or_else(|| unit_sd.get().map(|&v| (v, merged.amp[0], 0)));
+    // Seed the next pixel only from a pair found and reported, front first.
+    out.per_model[1].and_then(|two| next?.handed_on(&two.result, unit_sd))
+}
+
+/// The pixel's signal as one reflection: the one-reflection fit, or on a
+/// warm pixel the pair's amplitude-weighted centre and total amplitude.
+fn merged_signal(one: Option<&Candidate>, two: Option<&Candidate>) -> Params {
+    match (one, two) {
         (Some(one), _) => one.fit.params,
         (None, Some(two)) => {
             let p = two.fit.params;
@@ -335,123 +300,36 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             m
         }
         (None, None) => unreachable!("a warm pixel has its pair"),
-    };
-    let next = two.as_ref().and_then(|two| {
-        let (Ok(f), Ok(b)) = (ctx.prior.front, ctx.prior.back) else {
-            return None;
-        };
-        let n = data.count();
-        Some(Seed {
-            two: two.fit.params,
-            front: [f.u, f.v],
-            back: [b.u, b.v],
-            sigma2: two.fit.sigma2(n),
-            unit_sd: None,
-        })
-    });
-    // The expected pair's separation σ at unit noise: the same for every
-    // model (it is built on `merged`), so computed once. A warm pixel takes
-    // its row's last value, scaled by the merged amplitude (σ ∝ 1/B), where
-    // even twice that leaves the resolution test (RESOLVE_SIGMAS σ below
-    // the expected separation) passed at every model's noise level: there
-    // the approximation cannot change a decision.
-    let unit_sd = std::cell::OnceCell::new();
-    let mut carried = None;
-    if let (Some((sd0, amp0, age)), Some(d)) = (reuse, d12) {
-        let approx = sd0 * amp0 / merged.amp[0];
-        let n = data.count();
-        let worst = [one.as_ref(), two.as_ref()]
-            .into_iter()
-            .flatten()
-            .map(|c| c.fit.sigma2(n))
-            .fold(0.0, f64::max);
-        if age < UNIT_SD_REUSE
-            && approx.is_finite()
-            && 2.0 * RESOLVE_SIGMAS * approx * worst.sqrt() < d[0].hypot(d[1])
-        {
-            let _ = unit_sd.set(approx);
-            carried = Some((sd0, amp0, age + 1));
-        }
     }
-    for (k, cand) in [one, two, three].into_iter().enumerate() {
-        out.per_model[k] = cand.map(|c| Scored {
-            result: finalize(ctx, &c, data, d12, &merged, &unit_sd, out.base),
-            bic: c.bic,
-        });
-    }
-    let unit_sd = carried.or_else(|| unit_sd.get().map(|&v| (v, merged.amp[0], 0)));
-    // Seed the next pixel only from a pair found and reported, front first.
-    out.per_model[1].and_then(|two| {
-        let r = two.result;
-        (r.model == 2 && r.s[1][0].is_finite()).then_some(())?;
-        let mut s = next?;
-        s.unit_sd = unit_sd;
-        let p = s.two;
-        let front_first = (p.uv[0][0] - r.s[0][0]).hypot(p.uv[0][1] - r.s[0][1])
-            <= (p.uv[1][0] - r.s[0][0]).hypot(p.uv[1][1] - r.s[0][1]);
-        if !front_first {
-            s.two.uv.swap(0, 1);
-            s.two.amp.swap(0, 1);
-        }
-        Some(s)
-    })
 }
 
-/// The two-reflection fit started from the neighbour's, or `None` where the
-/// pixel must be searched (see [`fit_samples_seeded`]).
-fn warm_fits<S: Samples + ?Sized>(
-    ctx: &PixelContext,
-    data: &S,
-    seed: &Seed,
-) -> Option<(Candidate, f64)> {
-    if ctx.allow_third && ctx.prior.third.is_ok() {
-        return None;
-    }
-    let (Ok(f), Ok(b)) = (ctx.prior.front, ctx.prior.back) else {
+/// The expected pair's separation σ at unit noise is the same for every
+/// model (it is built on `merged`), so computed once (into `unit_sd`). A
+/// warm pixel takes its row's last value `reuse` (σ, the merged amplitude
+/// it was computed at, pixels since), scaled by the merged amplitude (σ ∝
+/// 1/B), where even twice that leaves the resolution test
+/// ([`RESOLVE_SIGMAS`] σ below the expected separation `d12`) passed at
+/// the worst model's noise level `worst_sigma2`: there the approximation
+/// cannot change a decision. Returns the value carried on, one pixel older.
+fn reused_unit_sd(
+    reuse: Option<(f64, f64, u32)>,
+    d12: Option<[f64; 2]>,
+    merged: &Params,
+    worst_sigma2: f64,
+    unit_sd: &OnceCell<f64>,
+) -> Option<(f64, f64, u32)> {
+    let (Some((sd0, amp0, age)), Some(d)) = (reuse, d12) else {
         return None;
     };
-    let mut two = seed.two;
-    for c in 0..2 {
-        two.uv[0][c] += [f.u, f.v][c] - seed.front[c];
-        two.uv[1][c] += [b.u, b.v][c] - seed.back[c];
+    let approx = sd0 * amp0 / merged.amp[0];
+    if age < UNIT_SD_REUSE
+        && approx.is_finite()
+        && 2.0 * RESOLVE_SIGMAS * approx * worst_sigma2.sqrt() < d[0].hypot(d[1])
+    {
+        let _ = unit_sd.set(approx);
+        return Some((sd0, amp0, age + 1));
     }
-    let n = data.count();
-    let (fit, next, remaining) = gauss_newton_step(data, two)?;
-    let sigma2 = fit.sigma2(n);
-    let two = if fit.converged {
-        fit
-    } else if remaining <= ONE_STEP_CHI2 * sigma2 {
-        Fit {
-            params: fit.params.add(&next),
-            rss: fit.rss - remaining,
-            iterations: 2,
-            converged: true,
-            ..fit
-        }
-    } else {
-        let fit = levenberg_marquardt(data, fit.params, ctx.max_iter);
-        if !fit.converged {
-            return None;
-        }
-        fit
-    };
-    let two = candidate(data, two);
-    let p = two.fit.params;
-    let sigma2 = two.fit.sigma2(n);
-    if sigma2 > WARM_NOISE_RATIO * seed.sigma2 {
-        return None;
-    }
-    let near = |a: f64, b: f64| (a - b).abs() <= WARM_CHANGE * b.abs();
-    let q = &seed.two;
-    if !(near(p.amp[0], q.amp[0]) && near(p.amp[1], q.amp[1]) && near(p.kappa, q.kappa)) {
-        return None;
-    }
-    let inv = two.inv.as_ref()?;
-    // The weaker amplitude's Wald statistic z = B / σ_B.
-    let z = (0..2)
-        .map(|k| p.amp[k] / (inv[(1 + k, 1 + k)] * sigma2).max(0.0).sqrt())
-        .fold(f64::INFINITY, f64::min);
-    (z > WARM_AMPLITUDE_SIGMAS).then_some((two, z * z))
+    None
 }
 
 /// The fits from the spectrum and the station geometry: the one-reflection
@@ -516,167 +394,4 @@ fn searched_fits<S: Samples + ?Sized>(
         two = Some(best);
     }
     Some((one, two, three))
-}
-
-/// The pixel's result under the candidate's model: labels from physics,
-/// checks, uncertainties.
-/// `merged` is the one-reflection fit (on a warm pixel, the pair's
-/// amplitude-weighted centre and total amplitude): its amplitude and
-/// falloff describe the pixel's signal robustly, so they judge whether a
-/// pair is separable; `unit_sd` caches that judgement's σ at unit noise.
-fn finalize<S: Samples + ?Sized>(
-    ctx: &PixelContext,
-    cand: &Candidate,
-    data: &S,
-    d12: Option<[f64; 2]>,
-    merged: &Params,
-    unit_sd: &std::cell::OnceCell<f64>,
-    base: PixelResult,
-) -> PixelResult {
-    let expected_sd = |d: &[f64; 2], sigma2: f64| {
-        unit_sd.get_or_init(|| {
-            expected_separation_std(ctx, data, merged, merged.uv[0], merged.amp[0], d, 1.0)
-        }) * sigma2.sqrt()
-    };
-    let mut out = base;
-    let fit = &cand.fit;
-    let p = fit.params;
-    let n = data.count();
-    if p.amp[..p.k].iter().any(|&b| b <= 0.0) {
-        out.flags |= flags::NEGATIVE_AMPLITUDE;
-        return out;
-    }
-    if !data.within_band(&p) {
-        out.flags |= flags::OUT_OF_BAND;
-        return out;
-    }
-    out.model = p.k as u8;
-    out.iterations = fit.iterations as u16;
-    out.residual_rms = (fit.rss / n as f64).sqrt();
-    out.tau_max = if p.kappa > 0.0 {
-        p.kappa.sqrt().recip()
-    } else {
-        f64::INFINITY
-    };
-    out.amp[0] = p.offset;
-    if !fit.converged {
-        out.flags |= flags::NOT_CONVERGED;
-    }
-    let sigma2 = fit.sigma2(n);
-    let cov = cand.inv.as_ref().map(|m| m * sigma2);
-    if p.k == 1 {
-        out.flags |= flags::ONE_REFLECTION;
-        // No back path predicted: the one reflection is the front.
-        let Some(d) = d12 else {
-            out.set(0, &p, 0, cov.as_ref());
-            out.amp[1] = p.amp[0];
-            return out;
-        };
-        // One reflection, or two this schedule cannot tell apart? Only if a
-        // back reflection of the expected strength at the expected offset
-        // would have been resolved is its absence real (AR-coated back).
-        out.separation_bins = separation_bins(ctx, &d);
-        // Here p is `merged` itself (the one-reflection fit).
-        let sd = expected_sd(&d, sigma2);
-        if RESOLVE_SIGMAS * sd > d[0].hypot(d[1]) {
-            out.flags |= flags::UNRESOLVED;
-            return out;
-        }
-        let dist = |q: Result<crate::optics::trace::ScreenHit, crate::optics::trace::Miss>| {
-            q.map_or(f64::INFINITY, |h| {
-                (p.uv[0][0] - h.u).hypot(p.uv[0][1] - h.v)
-            })
-        };
-        let slot = usize::from(dist(ctx.prior.back) < dist(ctx.prior.front));
-        out.set(slot, &p, 0, cov.as_ref());
-        out.amp[1 + slot] = p.amp[0];
-        return out;
-    }
-    if p.k == 3 {
-        out.flags |= flags::THREE_REFLECTIONS;
-        out.amp[3] = p.amp[2];
-    }
-    let d = d12.unwrap_or([1.0, 0.0]);
-    let sep = [p.uv[1][0] - p.uv[0][0], p.uv[1][1] - p.uv[0][1]];
-    let (i0, i1) = if sep[0] * d[0] + sep[1] * d[1] >= 0.0 {
-        (0, 1)
-    } else {
-        (1, 0)
-    };
-    let sep = [p.uv[i1][0] - p.uv[i0][0], p.uv[i1][1] - p.uv[i0][1]];
-    out.separation_bins = separation_bins(ctx, &sep);
-    // Resolved: the expected separation exceeds RESOLVE_SIGMAS standard
-    // deviations, both of the fitted separation and of the separation the
-    // data could give for the expected pair (the local bound at a poor fit
-    // can be too optimistic). Consistent: the fitted offset is within half
-    // the expected one (plus three σ) of it — farther, it could be a swap or
-    // a spurious pair, and neither point is reported.
-    let sd = cov
-        .as_ref()
-        .map_or(f64::INFINITY, |c| separation_std(c, &p, i0, i1));
-    let sd_expected = expected_sd(&d, sigma2);
-    let expected = d[0].hypot(d[1]);
-    if RESOLVE_SIGMAS * sd.max(sd_expected) > expected {
-        out.flags |= flags::UNRESOLVED;
-        return out;
-    }
-    if (sep[0] - d[0]).hypot(sep[1] - d[1]) > 0.5 * expected + 3.0 * sd {
-        out.flags |= flags::OFFSET_MISMATCH;
-        return out;
-    }
-    out.set(0, &p, i0, cov.as_ref());
-    out.set(1, &p, i1, cov.as_ref());
-    out.set_cross(&p, i0, i1, cov.as_ref());
-    out.amp[1] = p.amp[i0];
-    out.amp[2] = p.amp[i1];
-    out
-}
-
-/// The Cramér–Rao σ of |S2 − S1| for a pair with the predicted offset `d`
-/// and Fresnel amplitude ratio, centred (amplitude-weighted) on `centre`,
-/// with total amplitude `amp`, at noise `sigma2`: how well this pixel's data
-/// could separate the reflections the geometry expects, whatever the fit found.
-fn expected_separation_std<S: Samples + ?Sized>(
-    ctx: &PixelContext,
-    data: &S,
-    fitted: &Params,
-    centre: [f64; 2],
-    amp: f64,
-    d: &[f64; 2],
-    sigma2: f64,
-) -> f64 {
-    let w = match (ctx.prior.front, ctx.prior.back) {
-        (Ok(f), Ok(b)) => b.weight / (f.weight + b.weight),
-        _ => 0.5,
-    };
-    let c = centre;
-    let pair = [
-        [c[0] - w * d[0], c[1] - w * d[1]],
-        [c[0] + (1.0 - w) * d[0], c[1] + (1.0 - w) * d[1]],
-    ];
-    let mut p = start(2, &pair, fitted.kappa);
-    p.offset = fitted.offset;
-    p.amp[0] = amp * (1.0 - w);
-    p.amp[1] = amp * w;
-    spd_inverse(&data.information(&p)).map_or(f64::INFINITY, |inv| {
-        separation_std(&(inv * sigma2), &p, 0, 1)
-    })
-}
-
-/// Smallest separation over the directions, in Fourier bins, of two screen
-/// points `d` apart.
-fn separation_bins(ctx: &PixelContext, d: &[f64; 2]) -> f64 {
-    ctx.design
-        .axes
-        .iter()
-        .enumerate()
-        .map(|(k, ax)| (ax.a * d[0] + ax.b * d[1]).abs() / ctx.plans.bin(k))
-        .fold(f64::INFINITY, f64::min)
-}
-
-/// Standard deviation of |S_i1 − S_i0| from the covariance.
-fn separation_std(cov: &DMatrix<f64>, p: &Params, i0: usize, i1: usize) -> f64 {
-    let (a, b) = (p.u_index(i0), p.u_index(i1));
-    let var = |x: usize, y: usize| cov[(x, x)] + cov[(y, y)] - 2.0 * cov[(x, y)];
-    (var(a, b) + var(a + 1, b + 1)).max(0.0).sqrt()
 }

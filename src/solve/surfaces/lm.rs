@@ -1,12 +1,14 @@
 //! Levenberg–Marquardt over Zernike coefficients, on the normal equations
-//! of [`super::problem`]. The residuals are screen points in units of their
-//! σ; the problem is nearly linear (µm surfaces), so a Gauss–Newton step is
-//! accepted almost always and λ only guards the first steps from a flat start.
+//! of [`super::problem`] and the shared loop of [`crate::kernels::lm`]. The
+//! residuals are screen points in units of their σ; the problem is nearly
+//! linear (µm surfaces), so a Gauss–Newton step is accepted almost always
+//! and λ only guards the first steps from a flat start ([`DAMPING`]).
 
 use nalgebra::{DMatrix, DVector};
 
 use super::problem::{accumulate, Layout, Normal, Observations};
 use super::SurfaceError;
+use crate::kernels::lm::{self, Damping, LeastSquares, Linearisation, Stop};
 use crate::optics::station::Station;
 use crate::optics::trace::Plate;
 use crate::optics::zernike::ZernikeSurface;
@@ -91,18 +93,99 @@ pub fn apply(plate: &Plate, layout: &Layout, delta: &DVector<f64>) -> Result<Pla
     Ok(out)
 }
 
-/// Solves `(A + λ diag A) δ = −b`; `None` when not positive definite.
-fn step(n: &Normal, lambda: f64) -> Option<DVector<f64>> {
-    let mut a: DMatrix<f64> = n.a.clone();
-    for i in 0..a.nrows() {
-        a[(i, i)] *= 1.0 + lambda;
-    }
-    let chol = a.cholesky()?;
-    Some(-chol.solve(&n.b))
+/// The surface solvers' damping schedule for the shared loop
+/// ([`crate::kernels::lm`], whose policy it parameterises).
+///
+/// The solve starts from a flat plate (or the previous stage's surfaces) on
+/// a nearly linear problem — µm surfaces deflect rays linearly in their
+/// coefficients to ~1e-3 — so the Gauss–Newton step is right almost always:
+/// λ starts at 1e-6, Gauss–Newton to six digits. An evaluation traces every
+/// measured path, so when a step is rejected (it lost paths, or χ² rose)
+/// damping must become effective within few of them: ×10, reaching 0.1 in
+/// five; ÷10 after an accepted step returns to Gauss–Newton as fast. At λ =
+/// 1e8 a step is ~1e-8 of the Gauss–Newton one — for steps of ≲ 1 µm below
+/// 1e-5 nm, a tenth of the step tolerance ([`LmOptions::step_tol_nm`]):
+/// no step that matters lowers χ², the floor is reached. Floor 1e-12:
+/// Gauss–Newton to rounding.
+pub const DAMPING: Damping = Damping {
+    start: 1e-6,
+    up: 10.0,
+    down: 10.0,
+    floor: 1e-12,
+    cap: 1e8,
+    trust_prediction_below: None,
+};
+
+/// The normal equations as the shared loop reads them: the problem's
+/// residuals are model − data, so the loop's `Jᵀr` is `−b`.
+struct Linearised {
+    normal: Normal,
+    neg_b: DVector<f64>,
 }
 
-/// Minimises χ² over the free coefficients of `layout`, starting from (and
-/// updating) `plate`. Returns the report and the normal equations at the end.
+impl Linearised {
+    fn new(normal: Normal) -> Self {
+        let neg_b = -&normal.b;
+        Linearised { normal, neg_b }
+    }
+}
+
+impl Linearisation for Linearised {
+    fn cost(&self) -> f64 {
+        self.normal.chi2
+    }
+
+    fn jtj(&self) -> &DMatrix<f64> {
+        &self.normal.a
+    }
+
+    fn jtr(&self) -> &DVector<f64> {
+        &self.neg_b
+    }
+}
+
+/// One stage's solve as a problem of the shared loop.
+struct SurfaceProblem<'a> {
+    obs: &'a Observations,
+    station: &'a Station,
+    layout: &'a Layout,
+    opts: &'a LmOptions,
+}
+
+impl LeastSquares for SurfaceProblem<'_> {
+    type Params = Plate;
+    type Normal = Linearised;
+    type Error = SurfaceError;
+
+    fn evaluate(&self, plate: &Plate) -> Linearised {
+        Linearised::new(accumulate(self.obs, self.station, plate, self.layout, true))
+    }
+
+    fn moved(&self, plate: &Plate, step: &DVector<f64>) -> Result<Plate, SurfaceError> {
+        apply(plate, self.layout, step)
+    }
+
+    /// A step that loses paths is not comparable by χ² alone: rejected.
+    fn comparable(&self, current: &Linearised, trial: &Linearised) -> bool {
+        trial.normal.n_resid >= current.normal.n_resid
+    }
+
+    fn small_step(&self, step: &DVector<f64>) -> bool {
+        step.amax() < self.opts.step_tol_nm
+    }
+
+    /// With known σ, a χ² drop below [`CHI2_TOL`] means the step moved
+    /// every coefficient by far less than its own σ (≤ 0.03 σ): converged
+    /// in the statistical sense; noise-free data use the step rule.
+    fn decrease_tolerance(&self, _at: &Linearised) -> Option<f64> {
+        self.obs.sigma_known.then_some(CHI2_TOL)
+    }
+}
+
+/// Minimises χ² over the free coefficients of `layout` on the shared loop
+/// ([`crate::kernels::lm::minimise`], schedule [`DAMPING`]), starting from
+/// (and updating) `plate`. Returns the report and the normal equations at
+/// the end.
 ///
 /// # Errors
 /// [`SurfaceError::TooFewPoints`] when fewer residuals than unknowns remain;
@@ -116,80 +199,80 @@ pub fn levenberg_marquardt(
     opts: &LmOptions,
 ) -> Result<(LmReport, Normal), SurfaceError> {
     let p = layout.columns();
-    let mut cur = accumulate(obs, station, plate, layout, true);
-    if cur.n_resid < p {
+    let start = accumulate(obs, station, plate, layout, true);
+    if start.n_resid < p {
         return Err(SurfaceError::TooFewPoints {
             stage,
-            have: cur.n_resid,
+            have: start.n_resid,
             need: p,
         });
     }
-    let condition_number = condition_number(&cur);
+    let condition_number = condition_number(&start);
     if condition_number > MAX_CONDITION_NUMBER {
         return Err(SurfaceError::IllConditioned {
             stage,
             condition_number,
         });
     }
-    let mut report = LmReport {
-        iterations: 1,
-        chi2_start: cur.chi2,
+    let chi2_start = start.chi2;
+    let problem = SurfaceProblem {
+        obs,
+        station,
+        layout,
+        opts,
+    };
+    // The start's build counts as an iteration.
+    let max_trials = opts.max_iter.saturating_sub(1);
+    let out = lm::minimise(
+        &problem,
+        plate.clone(),
+        Linearised::new(start),
+        &DAMPING,
+        max_trials,
+    )?;
+    let Some((converged, reason)) = verdict(out.stop, out.last_step.as_ref(), opts) else {
+        return Err(SurfaceError::IllConditioned {
+            stage,
+            condition_number: f64::INFINITY,
+        });
+    };
+    *plate = out.params;
+    let cur = out.normal.normal;
+    let report = LmReport {
+        iterations: 1 + out.trials,
+        chi2_start,
         chi2: cur.chi2,
         n_resid: cur.n_resid,
-        converged: false,
-        reason: String::new(),
+        converged,
+        reason,
         failed: cur.failed,
     };
-    let mut lambda = 1e-6;
-    while report.iterations < opts.max_iter {
-        let Some(delta) = step(&cur, lambda) else {
-            if lambda > 1e6 {
-                return Err(SurfaceError::IllConditioned {
-                    stage,
-                    condition_number: f64::INFINITY,
-                });
-            }
-            lambda *= 100.0;
-            continue;
-        };
-        let largest = delta.amax();
-        let trial_plate = apply(plate, layout, &delta)?;
-        let trial = accumulate(obs, station, &trial_plate, layout, true);
-        report.iterations += 1;
-        // A step that loses paths is not comparable by χ² alone: reject it.
-        let comparable = trial.n_resid >= cur.n_resid;
-        if comparable && trial.chi2 <= cur.chi2 {
-            let drop = cur.chi2 - trial.chi2;
-            *plate = trial_plate;
-            cur = trial;
-            lambda = (lambda * 0.1).max(1e-12);
-            if largest < opts.step_tol_nm {
-                report.converged = true;
-                report.reason = format!("step below {} nm", opts.step_tol_nm);
-                break;
-            }
-            // With known σ, a χ² drop below 1e-3 means the step moved every
-            // coefficient by far less than its own σ (≤ 0.03 σ): converged
-            // in the statistical sense; noise-free data use the step rule.
-            if obs.sigma_known && drop < CHI2_TOL {
-                report.converged = true;
-                report.reason = format!("χ² drop {drop:.1e} below {CHI2_TOL}");
-                break;
-            }
-        } else {
-            lambda *= 10.0;
-            if lambda > 1e8 {
-                report.converged = largest < 1e3 * opts.step_tol_nm;
-                report.reason = "no step lowers χ² (at its floor)".into();
-                break;
-            }
-        }
-    }
-    if report.reason.is_empty() {
-        report.reason = format!("iteration limit {}", opts.max_iter);
-    }
-    report.chi2 = cur.chi2;
-    report.n_resid = cur.n_resid;
-    report.failed = cur.failed;
     Ok((report, cur))
+}
+
+/// Whether the loop's stop is convergence, and why in words; `None` where
+/// the damped system was singular at every damping. At the floor (no step
+/// lowers χ²) the point counts as converged when the last step tried was
+/// within 1e3 step tolerances: a minimum to rounding, not a stall far off.
+fn verdict(
+    stop: Stop,
+    last_step: Option<&DVector<f64>>,
+    opts: &LmOptions,
+) -> Option<(bool, String)> {
+    Some(match stop {
+        Stop::SmallStep => (true, format!("step below {} nm", opts.step_tol_nm)),
+        Stop::SmallDecrease { decrease }
+        | Stop::PredictedSmall {
+            predicted: decrease,
+        } => (true, format!("χ² drop {decrease:.1e} below {CHI2_TOL}")),
+        Stop::Floor => {
+            let largest = last_step.map_or(0.0, |s| s.amax());
+            (
+                largest < 1e3 * opts.step_tol_nm,
+                "no step lowers χ² (at its floor)".into(),
+            )
+        }
+        Stop::Singular => return None,
+        Stop::TrialLimit => (false, format!("iteration limit {}", opts.max_iter)),
+    })
 }

@@ -8,38 +8,13 @@ pub use super::observe::{Observation, Observations, Uncertainty};
 use rayon::prelude::*;
 
 use super::path::{back_path, front_path, DualPath, SLOT_BACK, SLOT_FRONT_IN, SLOT_FRONT_OUT};
+use crate::kernels::SmallCholesky;
 use crate::optics::station::Station;
 use crate::optics::trace::Plate;
 use crate::optics::zernike::ZernikeBasis;
 
 /// Millimetres per nanometre: coefficients are nm, the tracer works in mm.
 const MM_PER_NM: f64 = 1e-6;
-
-/// Lower Cholesky factor of the `m × m` block of `c` at entries `idx`,
-/// or `None` when it is not positive definite. (Triangular factor and
-/// solves read clearer with indices.)
-#[allow(clippy::needless_range_loop)]
-fn cholesky4(c: &[[f64; 4]; 4], idx: &[usize]) -> Option<[[f64; 4]; 4]> {
-    let m = idx.len();
-    let mut l = [[0.0; 4]; 4];
-    for i in 0..m {
-        for j in 0..=i {
-            let mut s = c[idx[i]][idx[j]];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
-            if i == j {
-                if s <= 0.0 {
-                    return None;
-                }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-    }
-    Some(l)
-}
 
 /// Which coefficients are unknowns and which data enter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -275,29 +250,27 @@ struct Scratch {
 
 impl Scratch {
     /// Whitens the `m` residuals (and rows, when `p > 0`) with the
-    /// covariance of the components present: `L⁻¹(·)`, `C = LLᵀ`.
-    #[allow(clippy::needless_range_loop)]
+    /// covariance of the components present: `L⁻¹(·)`, `C = LLᵀ`; by the
+    /// standard deviations alone where that block is not positive definite.
     fn whiten(&mut self, ob: &Observation, m: usize, p: usize) {
         let idx = &self.idx[..m];
-        let l = cholesky4(&ob.cov, idx).unwrap_or_else(|| {
-            let mut l = [[0.0; 4]; 4];
-            for (i, &a) in idx.iter().enumerate() {
-                l[i][i] = ob.cov[a][a].sqrt();
-            }
-            l
-        });
-        for i in 0..m {
-            let mut v = self.res[i];
-            for k in 0..i {
-                v -= l[i][k] * self.res[k];
-            }
-            self.res[i] = v / l[i][i];
-            for c in 0..p {
-                let mut x = self.rows[i][c];
-                for k in 0..i {
-                    x -= l[i][k] * self.rows[k][c];
+        let l =
+            SmallCholesky::<4>::from_fn(m, |i, j| ob.cov[idx[i]][idx[j]]).unwrap_or_else(|| {
+                let mut var = [0.0; 4];
+                for (v, &a) in var.iter_mut().zip(idx) {
+                    *v = ob.cov[a][a];
                 }
-                self.rows[i][c] = x / l[i][i];
+                SmallCholesky::diagonal(&var[..m])
+            });
+        l.forward_in_place(&mut self.res[..m]);
+        let mut x = [0.0; 4];
+        for c in 0..p {
+            for (xi, row) in x.iter_mut().zip(&self.rows[..m]) {
+                *xi = row[c];
+            }
+            l.forward_in_place(&mut x[..m]);
+            for (xi, row) in x.iter().zip(&mut self.rows[..m]) {
+                row[c] = *xi;
             }
         }
     }
@@ -353,46 +326,37 @@ impl Scratch {
                 self.idx[m] = 2 * k + c;
                 self.res[m] = path.uv[c].v - ob.s[k][c];
                 if p > 0 {
-                    let row = &mut self.rows[m];
-                    row.iter_mut().for_each(|x| *x = 0.0);
-                    if layout.fit_front {
-                        add_slot(
-                            row,
-                            &path,
-                            c,
-                            SLOT_FRONT_IN,
-                            &self.f_in,
-                            |t| layout.front_col(t),
-                            1.0,
-                        );
-                    }
-                    if k == 1 && layout.fit_back {
-                        add_slot(
-                            row,
-                            &path,
-                            c,
-                            SLOT_BACK,
-                            &self.bk,
-                            |t| layout.back_col(t),
-                            1.0,
-                        );
-                    }
-                    if k == 1 && layout.fit_front {
-                        add_slot(
-                            row,
-                            &path,
-                            c,
-                            SLOT_FRONT_OUT,
-                            &self.f_out,
-                            |t| layout.front_col(t),
-                            1.0,
-                        );
-                    }
+                    self.fill_row(m, &path, c, k == 1, layout);
                 }
                 m += 1;
             }
         }
         m
+    }
+
+    /// Row `m` of the Jacobian: component `c` of `path` (a back path when
+    /// `back`) over the free coefficients, from the basis values at its hits.
+    fn fill_row(&mut self, m: usize, path: &DualPath, c: usize, back: bool, layout: &Layout) {
+        let row = &mut self.rows[m];
+        row.iter_mut().for_each(|x| *x = 0.0);
+        let front_col = |t| layout.front_col(t);
+        if layout.fit_front {
+            add_slot(row, path, c, SLOT_FRONT_IN, &self.f_in, front_col, 1.0);
+        }
+        if back && layout.fit_back {
+            add_slot(
+                row,
+                path,
+                c,
+                SLOT_BACK,
+                &self.bk,
+                |t| layout.back_col(t),
+                1.0,
+            );
+        }
+        if back && layout.fit_front {
+            add_slot(row, path, c, SLOT_FRONT_OUT, &self.f_out, front_col, 1.0);
+        }
     }
 }
 
