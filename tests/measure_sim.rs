@@ -8,17 +8,17 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use mfd::acquire::acquisition::Acquisition;
-use mfd::acquire::camera::{
-    Camera, CameraConfig, CameraError, Frame, ScreenState, SimFaults, SimulatedCamera, TriggerMode,
-};
+use mfd::acquire::camera::{Camera, CameraConfig, CameraError, Frame, TriggerMode};
 use mfd::acquire::live::{
-    acquire, Counters, FrameSink, LiveError, MirroredDisplay, Recorder, Report, SequencerConfig,
-    Session, SimDisplay,
+    acquire, Counters, FrameSink, LiveError, Recorder, Report, SequencerConfig, Session,
 };
 use mfd::acquire::patterns::{Pattern, Schedule};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{
+    MirroredDisplay, RandomSurfaceSpec, Renderer, ScreenState, SimDisplay, SimFaults, SimParams,
+    SimulatedCamera,
+};
 
 /// The simulated station: the fixture's 48×48 camera and a random plate.
 struct Rig {
@@ -50,12 +50,12 @@ impl Rig {
     }
 
     /// Noise-free, so a frame is a function of its pattern alone.
-    fn renderer(&self) -> SimCamera {
+    fn renderer(&self) -> Renderer {
         let params = SimParams {
             bit_depth: 12,
             ..SimParams::default()
         };
-        SimCamera::new(&self.view, &self.station.screen, params).unwrap()
+        Renderer::new(&self.view, &self.station.screen, params).unwrap()
     }
 
     fn camera(

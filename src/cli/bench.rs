@@ -9,7 +9,7 @@ use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::optics::zernike::ZernikeSurface;
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 
 /// Arguments of `mfd bench`.
 #[derive(Args)]
@@ -127,7 +127,7 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
         bit_depth: 12,
         ..SimParams::default()
     };
-    let mut cam = SimCamera::new(&view, &station.screen, params)?;
+    let mut cam = Renderer::new(&view, &station.screen, params)?;
     let n_pix = station.camera.pixel_count();
     // The ingest alone, with no frames being rendered beside it, before the
     // run (so that its memory is not counted twice): a solver takes 32
@@ -225,7 +225,7 @@ fn render(args: &RenderArgs) -> anyhow::Result<()> {
     let n = args.frames.clamp(1, patterns.len());
     let mut frame = vec![0u16; station.camera.pixel_count()];
     let mut time = |params: SimParams| -> anyhow::Result<f64> {
-        let mut cam = SimCamera::new(&view, &station.screen, params)?;
+        let mut cam = Renderer::new(&view, &station.screen, params)?;
         cam.render(&patterns[0], 0, &mut frame); // warm the direction cache
         let t = Instant::now();
         for (k, p) in patterns.iter().take(n).enumerate() {

@@ -12,19 +12,15 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use mfd::acquire::acquisition::{Acquisition, FrameInfo};
-use mfd::acquire::camera::{
-    self, Camera, CameraConfig, CameraSpec, PixelFormat, ScreenState, SimFaults, SimulatedCamera,
-    TriggerMode,
-};
+use mfd::acquire::camera::{self, Camera, CameraConfig, CameraSpec, PixelFormat, TriggerMode};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
 use mfd::acquire::live::{
-    acquire, Counters, FrameSink, MirroredDisplay, Recorder, Report, SequencerConfig, Session,
-    SolverSink,
+    acquire, Counters, FrameSink, Recorder, Report, SequencerConfig, Session, SolverSink,
 };
 use mfd::acquire::patterns::Pattern;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
-use mfd::sim::{SimCamera, SimParams};
+use mfd::sim::{MirroredDisplay, Renderer, ScreenState, SimFaults, SimParams, SimulatedCamera};
 use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
 
 use super::simulate::ScheduleArgs;
@@ -281,7 +277,7 @@ fn simulated_camera(
         noise_frac: args.noise,
         ..SimParams::default()
     };
-    let renderer = SimCamera::new(&view, &station.screen, params)?;
+    let renderer = Renderer::new(&view, &station.screen, params)?;
     let f = &args.faults;
     anyhow::ensure!(
         f.sim_latency_ms.is_finite() && f.sim_latency_ms >= 0.0,

@@ -23,14 +23,12 @@
 
 mod recorder;
 mod sequencer;
-mod sim_display;
 mod sinks;
 
 use std::time::Duration;
 
 pub use recorder::Recorder;
 pub use sequencer::{acquire, Session};
-pub use sim_display::{MirroredDisplay, SimDisplay};
 pub use sinks::{FrameSink, SinkError, SolverSink};
 
 use crate::acquire::acquisition::AcquisitionError;
