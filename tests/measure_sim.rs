@@ -400,3 +400,51 @@ fn a_consumer_error_stops_the_run_and_is_reported() {
     drop(recorder);
     rig.assert_recorded(dir.path(), n);
 }
+
+#[test]
+fn a_consumer_failing_to_finish_is_reported_as_such() {
+    struct Unflushable;
+    impl FrameSink for Unflushable {
+        fn name(&self) -> &'static str {
+            "unflushable"
+        }
+        fn accept(&mut self, _: usize, _: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
+            Ok(())
+        }
+        fn finish(&mut self) -> Result<(), mfd::acquire::live::SinkError> {
+            Err("disk full".into())
+        }
+    }
+    let rig = Rig::new();
+    let dir = tempfile::tempdir().unwrap();
+    let screen = ScreenState::new();
+    let mut camera = rig.camera(&screen, SimFaults::default(), TriggerMode::Software);
+    let mut recorder = Recorder::create(dir.path(), &rig.station, &rig.patterns, false).unwrap();
+    let err = rig
+        .run(
+            &mut camera,
+            &screen,
+            &mut recorder,
+            Some(&mut Unflushable),
+            TriggerMode::Software,
+            2,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            LiveError::SinkFinish {
+                sink: "unflushable",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // Regression: the finish step was reported as frame usize::MAX.
+    let text = err.to_string();
+    assert!(
+        text.contains("finishing") && !text.contains(&usize::MAX.to_string()),
+        "{text}"
+    );
+    assert_eq!(recorder.recorded(), 40);
+}

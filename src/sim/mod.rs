@@ -27,7 +27,9 @@ pub use render::{Renderer, SimParams};
 pub use scene::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
 
-use crate::acquire::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};
+use crate::acquire::acquisition::{
+    AcquisitionError, AcquisitionWriter, FrameImage, FrameInfo, FrameLayout,
+};
 use crate::acquire::patterns::Pattern;
 use crate::formats::npy::{self, NpyError};
 use crate::formats::surfaces_file::{SurfacesFile, SurfacesFileError};
@@ -146,7 +148,13 @@ pub fn simulate(sim: &Simulation, out: &Path) -> Result<SimulationReport, SimErr
         let t = Instant::now();
         camera.render(pattern, index as u64, &mut frame);
         render_s += t.elapsed().as_secs_f64();
-        writer.write_frame(index, &frame)?;
+        let image = FrameImage {
+            width: w as u32,
+            height: h as u32,
+            bit_depth: camera.params().bit_depth as u8,
+            data: &frame,
+        };
+        writer.write_frame(index, &image)?;
     }
     writer.finish()?;
     Ok(SimulationReport {

@@ -95,6 +95,15 @@ pub enum LiveError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+    /// A consumer took every frame but failed to finish (flush, sync).
+    #[error("{sink}: finishing after the last frame: {source}")]
+    SinkFinish {
+        /// Which consumer.
+        sink: &'static str,
+        /// Its error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// The recorder could not prepare or resume the acquisition folder.
     #[error(transparent)]
     Acquisition(#[from] AcquisitionError),
