@@ -128,7 +128,7 @@ fn resume_continues_a_killed_recording() {
     assert_eq!(got, frame(4).data);
     // A schedule the recording is not a prefix of is refused.
     let mut other = patterns.clone();
-    other[1].tau = 0.5;
+    other[1].tau = 0.25;
     let err = Recorder::resume(dir.path(), &other)
         .unwrap_err()
         .to_string();

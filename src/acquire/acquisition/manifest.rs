@@ -46,7 +46,7 @@ pub struct FrameEntry {
 /// One `[[frame]]` table on its own, for appending to a manifest.
 #[derive(Serialize)]
 struct FrameTable<'a> {
-    frame: [&'a FrameEntry; 1],
+    frame: &'a [FrameEntry],
 }
 
 fn serialize_error(path: &Path) -> impl FnOnce(toml::ser::Error) -> AcquisitionError + '_ {
@@ -81,6 +81,9 @@ pub(super) fn head_text(
 /// # Errors
 /// [`AcquisitionError::Serialize`] naming `path`, the manifest.
 pub(super) fn frame_text(entry: &FrameEntry, path: &Path) -> Result<String, AcquisitionError> {
-    let table = toml::to_string(&FrameTable { frame: [entry] }).map_err(serialize_error(path))?;
+    let table = toml::to_string(&FrameTable {
+        frame: std::slice::from_ref(entry),
+    })
+    .map_err(serialize_error(path))?;
     Ok(format!("\n{table}"))
 }
