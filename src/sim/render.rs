@@ -1,5 +1,6 @@
-//! The simulated camera: renders what the station's camera records for any
-//! displayed pattern, from geometry traced once.
+//! The renderer ([`Renderer`]): what the station's camera records for any
+//! displayed pattern, from geometry traced once. The Camera-trait simulated
+//! camera (`sim::camera`) and the fake GigE camera's feed render with it.
 //!
 //! Per pixel, in camera counts before noise (paper Eq. 5, 7 with the spec's
 //! fringe):
