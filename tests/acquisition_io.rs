@@ -6,7 +6,9 @@ mod common;
 
 use std::path::Path;
 
-use mfd::acquire::acquisition::{Acquisition, AcquisitionWriter, FrameInfo, FrameLayout};
+use mfd::acquire::acquisition::{
+    Acquisition, AcquisitionWriter, FrameImage, FrameInfo, FrameLayout,
+};
 use mfd::formats::npy::StackDtype;
 
 fn infos(n: usize) -> Vec<FrameInfo> {
@@ -31,7 +33,14 @@ fn write(dir: &Path, layout: FrameLayout, n: usize, finish: bool) {
         AcquisitionWriter::create(dir, "station.toml", layout, &infos(n), 5, 3, false).unwrap();
     let upto = if finish { n } else { n - 1 };
     for k in 0..upto {
-        w.write_frame(k, &frame(k, 5, 3)).unwrap();
+        let data = frame(k, 5, 3);
+        let image = FrameImage {
+            width: 5,
+            height: 3,
+            bit_depth: 12,
+            data: &data,
+        };
+        w.write_frame(k, &image).unwrap();
     }
     if finish {
         w.finish().unwrap();

@@ -13,17 +13,15 @@ use std::time::Duration;
 
 use mfd::acquire::acquisition::Acquisition;
 use mfd::acquire::camera::aravis_fake::FakeStation;
-use mfd::acquire::camera::{
-    Camera, CameraConfig, ScreenState, SimFaults, SimulatedCamera, StreamStatistics, TriggerMode,
-};
-use mfd::acquire::live::{
-    acquire, Counters, FrameSink, MirroredDisplay, Recorder, SequencerConfig, Session, SimDisplay,
-};
+use mfd::acquire::camera::{Camera, CameraConfig, StreamStatistics, TriggerMode};
+use mfd::acquire::live::{acquire, Counters, FrameSink, Recorder, SequencerConfig, Session};
 use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
-use mfd::sim::{SimCamera, SimParams};
+use mfd::sim::{
+    MirroredDisplay, Renderer, ScreenState, SimDisplay, SimFaults, SimParams, SimulatedCamera,
+};
 
 static LOOPBACK: Mutex<()> = Mutex::new(());
 
@@ -42,7 +40,7 @@ fn run_fake(loss: f64) -> (Counters, StreamStatistics) {
         bit_depth: 12,
         ..SimParams::default()
     };
-    let renderer = || SimCamera::new(&view, &station.screen, params.clone()).unwrap();
+    let renderer = || Renderer::new(&view, &station.screen, params.clone()).unwrap();
     let screen = ScreenState::new();
     let sim = SimulatedCamera::new(renderer(), screen.clone(), SimFaults::default());
     let mut camera = FakeStation::start(sim).unwrap();

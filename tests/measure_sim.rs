@@ -8,17 +8,17 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use mfd::acquire::acquisition::Acquisition;
-use mfd::acquire::camera::{
-    Camera, CameraConfig, CameraError, Frame, ScreenState, SimFaults, SimulatedCamera, TriggerMode,
-};
+use mfd::acquire::camera::{Camera, CameraConfig, CameraError, Frame, TriggerMode};
 use mfd::acquire::live::{
-    acquire, Counters, FrameSink, LiveError, MirroredDisplay, Recorder, Report, SequencerConfig,
-    Session, SimDisplay,
+    acquire, Counters, FrameSink, LiveError, Recorder, Report, SequencerConfig, Session,
 };
 use mfd::acquire::patterns::{Pattern, Schedule};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{
+    MirroredDisplay, RandomSurfaceSpec, Renderer, ScreenState, SimDisplay, SimFaults, SimParams,
+    SimulatedCamera,
+};
 
 /// The simulated station: the fixture's 48×48 camera and a random plate.
 struct Rig {
@@ -50,12 +50,12 @@ impl Rig {
     }
 
     /// Noise-free, so a frame is a function of its pattern alone.
-    fn renderer(&self) -> SimCamera {
+    fn renderer(&self) -> Renderer {
         let params = SimParams {
             bit_depth: 12,
             ..SimParams::default()
         };
-        SimCamera::new(&self.view, &self.station.screen, params).unwrap()
+        Renderer::new(&self.view, &self.station.screen, params).unwrap()
     }
 
     fn camera(
@@ -399,4 +399,52 @@ fn a_consumer_error_stops_the_run_and_is_reported() {
     assert!((10..40).contains(&n), "{n}");
     drop(recorder);
     rig.assert_recorded(dir.path(), n);
+}
+
+#[test]
+fn a_consumer_failing_to_finish_is_reported_as_such() {
+    struct Unflushable;
+    impl FrameSink for Unflushable {
+        fn name(&self) -> &'static str {
+            "unflushable"
+        }
+        fn accept(&mut self, _: usize, _: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
+            Ok(())
+        }
+        fn finish(&mut self) -> Result<(), mfd::acquire::live::SinkError> {
+            Err("disk full".into())
+        }
+    }
+    let rig = Rig::new();
+    let dir = tempfile::tempdir().unwrap();
+    let screen = ScreenState::new();
+    let mut camera = rig.camera(&screen, SimFaults::default(), TriggerMode::Software);
+    let mut recorder = Recorder::create(dir.path(), &rig.station, &rig.patterns, false).unwrap();
+    let err = rig
+        .run(
+            &mut camera,
+            &screen,
+            &mut recorder,
+            Some(&mut Unflushable),
+            TriggerMode::Software,
+            2,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            LiveError::SinkFinish {
+                sink: "unflushable",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // Regression: the finish step was reported as frame usize::MAX.
+    let text = err.to_string();
+    assert!(
+        text.contains("finishing") && !text.contains(&usize::MAX.to_string()),
+        "{text}"
+    );
+    assert_eq!(recorder.recorded(), 40);
 }

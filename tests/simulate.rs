@@ -10,7 +10,7 @@ use mfd::formats::npy::StackDtype;
 use mfd::formats::surfaces_file::{self, SurfacesFile};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
-use mfd::sim::{simulate, RandomSurfaceSpec, SimCamera, SimParams, Simulation};
+use mfd::sim::{simulate, RandomSurfaceSpec, Renderer, SimParams, Simulation};
 use nalgebra::{DMatrix, DVector};
 
 fn fixture_station() -> Station {
@@ -144,8 +144,8 @@ fn rendering_is_seeded_and_order_independent() {
         ..SimParams::default()
     };
     let pats = Schedule::default().patterns();
-    let mut a = SimCamera::new(&view, &station.screen, params.clone()).unwrap();
-    let mut b = SimCamera::new(&view, &station.screen, params).unwrap();
+    let mut a = Renderer::new(&view, &station.screen, params.clone()).unwrap();
+    let mut b = Renderer::new(&view, &station.screen, params).unwrap();
     let n = station.camera.pixel_count();
     let (mut fa, mut fb, mut other) = (vec![0u16; n], vec![0u16; n], vec![0u16; n]);
     a.render(&pats[5], 5, &mut fa);
@@ -179,7 +179,7 @@ fn agrees_with_the_independent_fixture_frames() {
         noise_frac: 0.0,
         ..SimParams::default()
     };
-    let mut cam = SimCamera::new(&view, &station.screen, params).unwrap();
+    let mut cam = Renderer::new(&view, &station.screen, params).unwrap();
     let acq = Acquisition::open(&dir).unwrap();
     let mut theirs = Vec::new();
     let (mut sum2, mut sum, mut n) = (0.0, 0.0, 0usize);

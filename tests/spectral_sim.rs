@@ -8,7 +8,7 @@ use mfd::acquire::acquisition::FrameInfo;
 use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::model::{normal_equations, Params};
 use mfd::solve::spectral::{
     flags, CpuFits, Engine, FitBackend, FitBatch, SpectralConfig, SpectralMaps, SpectralSolver,
@@ -138,8 +138,8 @@ fn fed_solver(
     params: SimParams,
     patterns: &[mfd::acquire::patterns::Pattern],
     config: SpectralConfig,
-) -> (SpectralSolver, SimCamera) {
-    let mut cam = SimCamera::new(view, &station.screen, params).unwrap();
+) -> (SpectralSolver, Renderer) {
+    let mut cam = Renderer::new(view, &station.screen, params).unwrap();
     let frames: Vec<_> = FrameInfo::from_patterns(patterns);
     let mut solver = SpectralSolver::new(station, &frames, config).unwrap();
     let mut buf = vec![0u16; station.camera.pixel_count()];
@@ -247,7 +247,7 @@ fn saturated_samples_are_left_out_not_averaged_in(engine: Engine) {
         .draw_pair(25.5, [0.0, 0.0], 21)
         .unwrap();
     let view = TracedView::trace(&st, &Plate::new(&st, front, back, 3.0));
-    let g = SimCamera::new(&view, &st.screen, SimParams::default())
+    let g = Renderer::new(&view, &st.screen, SimParams::default())
         .unwrap()
         .gain();
     let params = SimParams {
@@ -617,7 +617,7 @@ fn statistics_flag_points_outside_their_band_never_guess() {
             ..config(Engine::Statistics)
         };
         // The solver renders with `shifted` but predicts with `nominal`.
-        let mut cam = SimCamera::new(&view, &shifted.screen, SimParams::default()).unwrap();
+        let mut cam = Renderer::new(&view, &shifted.screen, SimParams::default()).unwrap();
         let frames: Vec<_> = FrameInfo::from_patterns(&patterns);
         let mut solver = SpectralSolver::new(&nominal, &frames, cfg).unwrap();
         let mut buf = vec![0u16; nominal.camera.pixel_count()];

@@ -10,7 +10,7 @@ use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::report::metrics::rms_difference_nm;
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::bound::truth_cov_map;
 use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
 use mfd::solve::surfaces::report::figures;
@@ -43,7 +43,7 @@ fn run(seed: u64, terms: Option<usize>) -> Outcome {
         ..SimParams::default()
     };
     let patterns = schedule.patterns();
-    let mut cam = SimCamera::new(&view, &station.screen, params.clone()).unwrap();
+    let mut cam = Renderer::new(&view, &station.screen, params.clone()).unwrap();
     let frames = FrameInfo::from_patterns(&patterns);
     let mut solver = SpectralSolver::new(&station, &frames, SpectralConfig::default()).unwrap();
     let mut buf = vec![0u16; station.camera.pixel_count()];

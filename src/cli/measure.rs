@@ -11,15 +11,13 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use mfd::acquire::camera::{
-    self, CameraConfig, CameraSpec, PixelFormat, ScreenState, SimFaults, SimulatedCamera,
-};
+use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::acquire::live::{Counters, Measurement, MirroredDisplay, Report, SequencerConfig, Start};
+use mfd::acquire::live::{Counters, Measurement, Report, SequencerConfig, Start};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::pipeline::{self, Input, Options};
-use mfd::sim::{SimCamera, SimParams};
+use mfd::sim::{MirroredDisplay, Renderer, ScreenState, SimFaults, SimParams, SimulatedCamera};
 
 /// Arguments of `mfd measure`.
 #[derive(Args, Clone)]
@@ -281,7 +279,7 @@ fn simulated_camera(
         noise_frac: args.noise,
         ..SimParams::default()
     };
-    let renderer = SimCamera::new(&view, &station.screen, params)?;
+    let renderer = Renderer::new(&view, &station.screen, params)?;
     let f = &args.faults;
     anyhow::ensure!(
         f.sim_latency_ms.is_finite() && f.sim_latency_ms >= 0.0,

@@ -17,7 +17,7 @@ use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::report::metrics::rms_difference_nm;
 use mfd::report::plot::{line_plot_png, Panel, Series};
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
 use mfd::solve::surfaces::lm::LmOptions;
 use mfd::solve::surfaces::report::figures;
@@ -124,7 +124,7 @@ fn spectral(
         seed: args.seed + n as u64,
         ..SimParams::default()
     };
-    let mut cam = SimCamera::new(view, &station.screen, params)?;
+    let mut cam = Renderer::new(view, &station.screen, params)?;
     let config = SpectralConfig {
         max_iter: it.max(1),
         ..SpectralConfig::default()

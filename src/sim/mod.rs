@@ -1,17 +1,35 @@
-//! The simulated station: a camera that renders what the real one would
-//! record ([`SimCamera`]), seeded random scenes ([`RandomSurfaceSpec`]), and
-//! [`simulate`], which writes a whole acquisition folder with its truth.
+//! The simulated station, all in one place: the renderer of what the real
+//! camera would record ([`Renderer`]), the simulated camera behind the
+//! [`Camera`](crate::acquire::camera::Camera) trait ([`SimulatedCamera`],
+//! with injected [`SimFaults`]), what the simulated screen shows
+//! ([`ScreenState`], [`SimDisplay`], [`MirroredDisplay`]), the frame feed of
+//! the fake GigE Vision camera ([`GigeFeed`]), seeded random scenes
+//! ([`RandomSurfaceSpec`]), and [`simulate`], which writes a whole
+//! acquisition folder with its truth.
+//!
+//! Arrows point down: this module uses `acquire` (the camera trait, the
+//! displays, patterns, the acquisition writer) and `optics`; `acquire`
+//! reaches back only where `--camera sim` and `aravis:fake` are selected
+//! (`acquire::camera::open` and `acquire::camera::aravis_fake`).
 
 mod camera;
+mod gige_feed;
+mod render;
 mod scene;
+mod screen;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-pub use camera::{SimCamera, SimParams};
+pub use camera::{SimFaults, SimulatedCamera};
+pub use gige_feed::{Filled, GigeFeed};
+pub use render::{Renderer, SimParams};
 pub use scene::RandomSurfaceSpec;
+pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
 
-use crate::acquire::acquisition::{AcquisitionError, AcquisitionWriter, FrameInfo, FrameLayout};
+use crate::acquire::acquisition::{
+    AcquisitionError, AcquisitionWriter, FrameImage, FrameInfo, FrameLayout,
+};
 use crate::acquire::patterns::Pattern;
 use crate::formats::npy::{self, NpyError};
 use crate::formats::surfaces_file::{SurfacesFile, SurfacesFileError};
@@ -110,7 +128,7 @@ pub fn simulate(sim: &Simulation, out: &Path) -> Result<SimulationReport, SimErr
     let t0 = Instant::now();
     let view = TracedView::trace(station, plate);
     let trace_s = t0.elapsed().as_secs_f64();
-    let mut camera = SimCamera::new(&view, &station.screen, params)?;
+    let mut camera = Renderer::new(&view, &station.screen, params)?;
     let frames: Vec<FrameInfo> = FrameInfo::from_patterns(patterns);
     let (w, h) = camera.resolution();
     let mut writer = AcquisitionWriter::create(
@@ -130,7 +148,13 @@ pub fn simulate(sim: &Simulation, out: &Path) -> Result<SimulationReport, SimErr
         let t = Instant::now();
         camera.render(pattern, index as u64, &mut frame);
         render_s += t.elapsed().as_secs_f64();
-        writer.write_frame(index, &frame)?;
+        let image = FrameImage {
+            width: w as u32,
+            height: h as u32,
+            bit_depth: camera.params().bit_depth as u8,
+            data: &frame,
+        };
+        writer.write_frame(index, &image)?;
     }
     writer.finish()?;
     Ok(SimulationReport {

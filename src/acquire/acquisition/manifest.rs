@@ -1,6 +1,12 @@
-//! The on-disk form of `acquisition.toml` (`mfd-acquisition/1`).
+//! The on-disk form of `acquisition.toml` (`mfd-acquisition/1`): its serde
+//! types, and the text the writer puts on disk, made from them by serde
+//! only (the head, then one `[[frame]]` table per frame).
+
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
+
+use super::AcquisitionError;
 
 /// The format tag every acquisition manifest carries.
 pub const ACQUISITION_FORMAT: &str = "mfd-acquisition/1";
@@ -17,7 +23,7 @@ pub struct ManifestFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stack: Option<String>,
     /// One entry per captured frame, in capture order.
-    #[serde(rename = "frame", default)]
+    #[serde(rename = "frame", default, skip_serializing_if = "Vec::is_empty")]
     pub frames: Vec<FrameEntry>,
 }
 
@@ -35,4 +41,49 @@ pub struct FrameEntry {
     /// Image file of this frame, relative to the manifest (when there is no stack).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file: Option<String>,
+}
+
+/// One `[[frame]]` table on its own, for appending to a manifest.
+#[derive(Serialize)]
+struct FrameTable<'a> {
+    frame: &'a [FrameEntry],
+}
+
+fn serialize_error(path: &Path) -> impl FnOnce(toml::ser::Error) -> AcquisitionError + '_ {
+    move |source| AcquisitionError::Serialize {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// The manifest's head: a `# note` comment line, then `format`, `station`
+/// and `stack` (the frames of `head`, if any, are left out).
+///
+/// # Errors
+/// [`AcquisitionError::Serialize`] naming `path`, the manifest.
+pub(super) fn head_text(
+    head: &ManifestFile,
+    note: &str,
+    path: &Path,
+) -> Result<String, AcquisitionError> {
+    let head = ManifestFile {
+        frames: Vec::new(),
+        ..head.clone()
+    };
+    let body = toml::to_string(&head).map_err(serialize_error(path))?;
+    Ok(format!("# {note}\n{body}"))
+}
+
+/// One frame's `[[frame]]` table, preceded by a blank line: appended to a
+/// manifest's text it keeps it valid TOML of the spec. Values are written
+/// by serde (`f64` in the shortest form that reads back to the same bits).
+///
+/// # Errors
+/// [`AcquisitionError::Serialize`] naming `path`, the manifest.
+pub(super) fn frame_text(entry: &FrameEntry, path: &Path) -> Result<String, AcquisitionError> {
+    let table = toml::to_string(&FrameTable {
+        frame: std::slice::from_ref(entry),
+    })
+    .map_err(serialize_error(path))?;
+    Ok(format!("\n{table}"))
 }

@@ -1,7 +1,9 @@
 //! Acquisition folders (`mfd-acquisition/1`): the manifest, the one reader
-//! the solvers and tools use, and the writer the simulator and recorder use.
+//! the solvers and tools use, and the one writer, in two modes: a whole
+//! acquisition (the simulator) and a crash-safe append (the recorder).
 //! Frames are read one at a time, never all at once.
 
+mod append;
 mod manifest;
 mod writer;
 
@@ -9,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 pub use manifest::{FrameEntry, ManifestFile, ACQUISITION_FORMAT};
-pub use writer::{AcquisitionWriter, FrameLayout};
+pub use writer::{AcquisitionWriter, FrameImage, FrameLayout};
 
 use crate::formats::image_io::{self, ImageError};
 use crate::formats::npy::{NpyError, NpyStackReader};
@@ -69,6 +71,15 @@ pub enum AcquisitionError {
         /// The image error, naming the file.
         #[source]
         source: ImageError,
+    },
+    /// The manifest could not be serialised (a value TOML cannot hold).
+    #[error("{path}: cannot write the manifest: {source}")]
+    Serialize {
+        /// The manifest.
+        path: PathBuf,
+        /// The TOML error, which names the value.
+        #[source]
+        source: toml::ser::Error,
     },
     /// The writer would replace an existing acquisition.
     #[error("{path}: an acquisition is already there (pass --overwrite to replace it)")]

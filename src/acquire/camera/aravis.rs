@@ -389,7 +389,7 @@ impl Camera for AravisCamera {
 impl Drop for AravisCamera {
     fn drop(&mut self) {
         if let Err(e) = self.stop() {
-            eprintln!("warning: stopping the camera stream: {e}");
+            log::warn!("stopping the camera stream: {e}");
         }
     }
 }

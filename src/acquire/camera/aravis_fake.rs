@@ -1,7 +1,7 @@
 //! The simulated station served over the real GigE Vision protocol
 //! (feature `aravis`): libaravis's fake GigE Vision camera runs in this
 //! process on the loopback interface, its images filled by the simulated
-//! camera from the shared [`ScreenState`], and an [`AravisCamera`] client
+//! station's feed ([`GigeFeed`], in `sim`), and an [`AravisCamera`] client
 //! connects to it at `127.0.0.1` like to any camera on the network
 //! (GVCP control, GVSP stream, heartbeats, packet resends).
 //!
@@ -14,24 +14,25 @@
 use std::collections::VecDeque;
 use std::ffi::c_void;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use aravis::glib::translate::ToGlibPtr;
 use aravis::GvFakeCamera;
 
 use super::aravis::{AravisCamera, Tags};
-use super::sim::ScreenState;
 use super::StreamStatistics;
+use super::TriggerMode;
 use super::{Camera, CameraConfig, CameraError, CameraInfo, Frame, PixelFormat, Region};
-use super::{SimulatedCamera, TriggerMode};
+// The `aravis:fake` selection point: the one place this module reaches
+// into the simulated station.
+use crate::sim::{GigeFeed, ScreenState, SimulatedCamera};
 
 /// Tags kept (frames the client may still have queued).
 const TAGS_KEPT: usize = 1024;
 
 /// What the fill callback needs; boxed so its address is stable.
 struct Fill {
-    camera: Mutex<SimulatedCamera>,
-    screen: ScreenState,
+    feed: GigeFeed,
     tags: Tags,
 }
 
@@ -81,32 +82,19 @@ unsafe extern "C" fn fill_pattern(
 
 impl Fill {
     fn render(&self, bytes: &mut [u8], w: usize, h: usize, id: u64, format: u32) {
-        let now = Instant::now();
-        let mut cam = self.camera.lock().unwrap_or_else(|p| p.into_inner());
-        let frame = cam.render_at(now, id);
-        drop(cam);
-        let n = w * h;
-        if (frame.width as usize, frame.height as usize) != (w, h) {
-            return; // the client has not set the station's region yet
-        }
-        match format {
-            aravis_sys::ARV_PIXEL_FORMAT_MONO_8 if bytes.len() >= n => {
-                for (b, &v) in bytes.iter_mut().zip(&frame.data) {
-                    *b = v.min(255) as u8;
-                }
-            }
-            aravis_sys::ARV_PIXEL_FORMAT_MONO_16 if bytes.len() >= 2 * n => {
-                for (b, &v) in bytes.chunks_exact_mut(2).zip(&frame.data) {
-                    b.copy_from_slice(&v.to_le_bytes());
-                }
-            }
+        let format = match format {
+            aravis_sys::ARV_PIXEL_FORMAT_MONO_8 => PixelFormat::Mono8,
+            aravis_sys::ARV_PIXEL_FORMAT_MONO_16 => PixelFormat::Mono16,
             _ => return,
-        }
+        };
+        let Some(filled) = self.feed.fill(bytes, w, h, id, format) else {
+            return;
+        };
         let mut tags = self.tags.lock().unwrap_or_else(|p| p.into_inner());
         if tags.len() == TAGS_KEPT {
             tags.pop_front();
         }
-        tags.push_back((id, frame.exposed_pattern));
+        tags.push_back((id, filled.exposed_pattern));
     }
 }
 
@@ -128,12 +116,9 @@ impl FakeStation {
     /// [`CameraError::Device`] when the fake camera cannot bind loopback
     /// (another one running?) or the client cannot reach it.
     pub fn start(sim: SimulatedCamera) -> Result<Self, CameraError> {
-        let screen = sim.screen().clone();
-        let (w, h) = sim.describe().resolution;
-        let format = match sim.describe().pixel_formats.first() {
-            Some(PixelFormat::Mono8) => PixelFormat::Mono8,
-            _ => PixelFormat::Mono16,
-        };
+        let feed = GigeFeed::new(sim);
+        let (w, h) = feed.resolution();
+        let format = feed.pixel_format();
         let serial = format!("MFD{}", std::process::id());
         let server = GvFakeCamera::new(Some("lo"), Some(&serial));
         if !server.is_running() {
@@ -146,8 +131,7 @@ impl FakeStation {
         }
         let tags: Tags = Arc::new(Mutex::new(VecDeque::new()));
         let fill = Box::new(Fill {
-            camera: Mutex::new(sim),
-            screen,
+            feed,
             tags: Arc::clone(&tags),
         });
         let Some(fake) = server.fake_camera() else {
@@ -192,7 +176,7 @@ impl FakeStation {
 
     /// The screen the simulated camera behind the fake looks at.
     pub fn screen(&self) -> &ScreenState {
-        &self.fill.screen
+        self.fill.feed.screen()
     }
 }
 
@@ -248,7 +232,7 @@ impl Camera for FakeStation {
 impl Drop for FakeStation {
     fn drop(&mut self) {
         if let Err(e) = self.client.stop() {
-            eprintln!("warning: stopping the fake camera's stream: {e}");
+            log::warn!("stopping the fake camera's stream: {e}");
         }
         if let Some(fake) = self.server.fake_camera() {
             // SAFETY: resets the default fill pattern under the fake camera's

@@ -1,8 +1,9 @@
 //! Cameras: one narrow [`Camera`] trait and its backends.
 //!
-//! - [`sim`] (always built): the optical core's simulated camera, looking at
-//!   whatever pattern a shared [`ScreenState`] says is on the screen, with
-//!   injected faults (latency, drops, early exposures, disconnects).
+//! - `sim` (always built): the simulated station's camera
+//!   ([`crate::sim::SimulatedCamera`], which lives with the rest of the
+//!   simulated station in [`crate::sim`]), looking at whatever pattern a
+//!   shared screen state says is on the screen, with injected faults.
 //! - `aravis` (feature `aravis`): GigE Vision and USB3 Vision cameras through
 //!   libaravis 0.8, and an in-process GigE Vision fake camera on loopback
 //!   serving the simulated station.
@@ -11,7 +12,9 @@
 //! Backends are chosen by a [`CameraSpec`] string (`sim`, `aravis`,
 //! `aravis:ID`, `aravis:fake`, `v4l:/dev/videoN`); one that was not compiled
 //! in answers [`CameraError::NotBuilt`] naming its feature. This file is the
-//! only place that looks at those features.
+//! only place that looks at those features. [`open`] (for `sim`) and
+//! `aravis_fake` (for `aravis:fake`) are the only places in `acquire` that
+//! use the simulated station.
 
 #[cfg(feature = "aravis")]
 pub mod aravis;
@@ -19,7 +22,6 @@ pub mod aravis;
 pub mod aravis_fake;
 pub mod convert;
 mod error;
-pub mod sim;
 #[cfg(feature = "v4l")]
 pub mod v4l;
 
@@ -27,7 +29,8 @@ use std::str::FromStr;
 use std::time::{Duration, Instant};
 
 pub use error::CameraError;
-pub use sim::{ScreenState, SimFaults, SimulatedCamera};
+// The `--camera sim` selection point (see `open`).
+use crate::sim::SimulatedCamera;
 
 /// Pixel formats the backends deliver (all stored as `u16` counts).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -248,7 +251,7 @@ impl FromStr for CameraSpec {
 
 impl CameraSpec {
     /// Whether this camera looks at a simulated station (and so needs a
-    /// [`SimulatedCamera`] renderer and a [`ScreenState`]).
+    /// [`SimulatedCamera`] and a [`crate::sim::ScreenState`]).
     pub fn is_simulated(&self) -> bool {
         matches!(self, CameraSpec::Sim)
             || matches!(self, CameraSpec::Aravis(Some(id)) if id == "fake")

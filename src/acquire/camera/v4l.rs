@@ -242,10 +242,7 @@ impl Camera for V4lCamera {
         // (other than for an unplugged device): keep that out of our drop.
         let dropped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| drop(stream)));
         if dropped.is_err() {
-            eprintln!(
-                "warning: {}: releasing the capture buffers failed",
-                self.path
-            );
+            log::warn!("{}: releasing the capture buffers failed", self.path);
         }
         stopped
     }
@@ -298,7 +295,7 @@ impl Camera for V4lCamera {
 impl Drop for V4lCamera {
     fn drop(&mut self) {
         if let Err(e) = self.stop() {
-            eprintln!("warning: stopping the camera stream: {e}");
+            log::warn!("stopping the camera stream: {e}");
         }
     }
 }

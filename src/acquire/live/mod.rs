@@ -24,7 +24,6 @@
 mod measurement;
 mod recorder;
 mod sequencer;
-mod sim_display;
 mod sinks;
 
 use std::time::Duration;
@@ -32,7 +31,6 @@ use std::time::Duration;
 pub use measurement::{Measurement, MeasurementError, Start};
 pub use recorder::Recorder;
 pub use sequencer::{acquire, Session};
-pub use sim_display::{MirroredDisplay, SimDisplay};
 pub use sinks::{FrameSink, SinkError, SolverSink};
 
 use crate::acquire::acquisition::AcquisitionError;
@@ -95,6 +93,15 @@ pub enum LiveError {
         sink: &'static str,
         /// The frame it failed on.
         frame: usize,
+        /// Its error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// A consumer took every frame but failed to finish (flush, sync).
+    #[error("{sink}: finishing after the last frame: {source}")]
+    SinkFinish {
+        /// Which consumer.
+        sink: &'static str,
         /// Its error.
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,

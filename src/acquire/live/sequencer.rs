@@ -103,11 +103,8 @@ fn drain(sink: &mut dyn FrameSink, rx: Receiver<Arc<Tagged>>) -> Result<(), Live
                 source,
             })?;
     }
-    sink.finish().map_err(|source| LiveError::Sink {
-        sink: name,
-        frame: usize::MAX,
-        source,
-    })
+    sink.finish()
+        .map_err(|source| LiveError::SinkFinish { sink: name, source })
 }
 
 struct Shooter<'a> {

@@ -13,7 +13,7 @@ use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::optics::zernike::ZernikeSurface;
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 
 /// Arguments of `mfd bench`.
 #[derive(Args)]
@@ -131,7 +131,7 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
         bit_depth: 12,
         ..SimParams::default()
     };
-    let mut cam = SimCamera::new(&view, &station.screen, params)?;
+    let mut cam = Renderer::new(&view, &station.screen, params)?;
     let n_pix = station.camera.pixel_count();
     let quiet_ms = quiet_ingest_ms(&station, &frames, &config, &mut cam, &patterns[0])?;
     let mut solver = SpectralSolver::new(&station, &frames, config)?;
@@ -177,7 +177,7 @@ fn quiet_ingest_ms(
     station: &Station,
     frames: &[mfd::acquire::acquisition::FrameInfo],
     config: &mfd::solve::spectral::SpectralConfig,
-    cam: &mut SimCamera,
+    cam: &mut Renderer,
     pattern: &mfd::acquire::patterns::Pattern,
 ) -> anyhow::Result<f64> {
     let mut probe = mfd::solve::spectral::SpectralSolver::new(station, frames, config.clone())?;
@@ -200,7 +200,7 @@ fn quiet_ingest_ms(
 /// which the latency runs (its push ingests the last block and seals the
 /// statistics).
 fn stream(
-    mut cam: SimCamera,
+    mut cam: Renderer,
     patterns: Vec<mfd::acquire::patterns::Pattern>,
     solver: &mut mfd::solve::spectral::SpectralSolver,
 ) -> anyhow::Result<(f64, f64, Instant)> {
@@ -249,7 +249,7 @@ fn render(args: &RenderArgs) -> anyhow::Result<()> {
     let n = args.frames.clamp(1, patterns.len());
     let mut frame = vec![0u16; station.camera.pixel_count()];
     let mut time = |params: SimParams| -> anyhow::Result<f64> {
-        let mut cam = SimCamera::new(&view, &station.screen, params)?;
+        let mut cam = Renderer::new(&view, &station.screen, params)?;
         cam.render(&patterns[0], 0, &mut frame); // warm the direction cache
         let t = Instant::now();
         for (k, p) in patterns.iter().take(n).enumerate() {

@@ -7,7 +7,7 @@ use mfd::acquire::acquisition::FrameInfo;
 use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
-use mfd::sim::{RandomSurfaceSpec, SimCamera, SimParams};
+use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::bound::two_reflection_bound;
 use mfd::solve::spectral::{flags, SpectralConfig, SpectralSolver};
 
@@ -73,7 +73,7 @@ fn row(
         seed: 5,
         ..SimParams::default()
     };
-    let mut cam = SimCamera::new(&view, &station.screen, params.clone())?;
+    let mut cam = Renderer::new(&view, &station.screen, params.clone())?;
     let patterns = Schedule::default().patterns();
     let frames: Vec<FrameInfo> = FrameInfo::from_patterns(&patterns);
     let config = SpectralConfig {

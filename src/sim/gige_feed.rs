@@ -1,0 +1,104 @@
+//! The frame feed of the fake GigE Vision camera: what the simulated
+//! station's camera would record, rendered into the buffers that the fake
+//! camera sends over loopback.
+//!
+//! The Aravis plumbing (the fake camera, its fill callback, the client) is
+//! `acquire::camera::aravis_fake` (feature `aravis`); this part needs no
+//! Aravis and renders with a [`SimulatedCamera`] looking at its
+//! [`ScreenState`].
+
+use std::sync::Mutex;
+use std::time::Instant;
+
+use super::camera::SimulatedCamera;
+use super::screen::ScreenState;
+use crate::acquire::camera::{Camera, PixelFormat};
+
+/// A rendered frame's tag: the schedule index of the pattern it saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Filled {
+    /// Pattern on the screen at the exposure; `None` while it was blank.
+    pub exposed_pattern: Option<usize>,
+}
+
+/// Renders the simulated station into the fake camera's frame buffers.
+#[derive(Debug)]
+pub struct GigeFeed {
+    camera: Mutex<SimulatedCamera>,
+    screen: ScreenState,
+    resolution: (u32, u32),
+    format: PixelFormat,
+}
+
+impl GigeFeed {
+    /// A feed rendering with `camera` (and the screen it looks at).
+    pub fn new(camera: SimulatedCamera) -> Self {
+        let screen = camera.screen().clone();
+        let info = camera.describe();
+        let format = match info.pixel_formats.first() {
+            Some(PixelFormat::Mono8) => PixelFormat::Mono8,
+            _ => PixelFormat::Mono16,
+        };
+        GigeFeed {
+            camera: Mutex::new(camera),
+            screen,
+            resolution: info.resolution,
+            format,
+        }
+    }
+
+    /// The screen the simulated camera looks at.
+    pub fn screen(&self) -> &ScreenState {
+        &self.screen
+    }
+
+    /// Frame size `(width, height)`, pixels.
+    pub fn resolution(&self) -> (u32, u32) {
+        self.resolution
+    }
+
+    /// The format the fake camera should send: 8 bits for an 8-bit
+    /// simulation, 16 otherwise.
+    pub fn pixel_format(&self) -> PixelFormat {
+        self.format
+    }
+
+    /// Renders the screen as it is now into `bytes`, a `width × height`
+    /// buffer of `format` (8-bit samples, or 16-bit little-endian), for
+    /// frame `frame_id`. Returns `None` and writes nothing when the buffer
+    /// is not the station's size (the client has not set the region yet),
+    /// too short, or of another format.
+    pub fn fill(
+        &self,
+        bytes: &mut [u8],
+        width: usize,
+        height: usize,
+        frame_id: u64,
+        format: PixelFormat,
+    ) -> Option<Filled> {
+        let now = Instant::now();
+        let mut cam = self.camera.lock().unwrap_or_else(|p| p.into_inner());
+        let frame = cam.render_at(now, frame_id);
+        drop(cam);
+        let n = width * height;
+        if (frame.width as usize, frame.height as usize) != (width, height) {
+            return None;
+        }
+        match format {
+            PixelFormat::Mono8 if bytes.len() >= n => {
+                for (b, &v) in bytes.iter_mut().zip(&frame.data) {
+                    *b = v.min(255) as u8;
+                }
+            }
+            PixelFormat::Mono16 if bytes.len() >= 2 * n => {
+                for (b, &v) in bytes.chunks_exact_mut(2).zip(&frame.data) {
+                    b.copy_from_slice(&v.to_le_bytes());
+                }
+            }
+            _ => return None,
+        }
+        Some(Filled {
+            exposed_pattern: frame.exposed_pattern,
+        })
+    }
+}
