@@ -8,7 +8,7 @@ use common::mfd;
 
 use mfd::acquire::acquisition::FrameInfo;
 use mfd::optics::station::Station;
-use mfd::solve::spectral::{flags, Engine, SpectralConfig, SpectralSolver};
+use mfd::solve::spectral::{Engine, PixelFlags, SpectralConfig, SpectralSolver};
 
 fn simulate(dir: &std::path::Path) -> std::path::PathBuf {
     let station = common::public_small().join("station.toml");
@@ -131,7 +131,9 @@ fn dark_and_saturated_frames_give_flagged_pixels_not_panics() {
         assert_eq!(maps.found_both(), 0);
         for p in &maps.pixels {
             assert!(
-                p.s[0][0].is_nan() && p.flags & (flags::NO_DATA | flags::NO_SIGNAL) != 0,
+                p.s[0][0].is_nan()
+                    && p.flags
+                        .intersects(PixelFlags::NO_DATA | PixelFlags::NO_SIGNAL),
                 "{engine:?}, level {level}: {p:?}"
             );
         }

@@ -11,7 +11,7 @@ use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::model::{normal_equations, Params};
 use mfd::solve::spectral::{
-    flags, CpuFits, Engine, FitBackend, FitBatch, SpectralConfig, SpectralMaps, SpectralSolver,
+    CpuFits, Engine, FitBackend, FitBatch, PixelFlags, SpectralConfig, SpectralMaps, SpectralSolver,
 };
 
 struct Run {
@@ -259,7 +259,7 @@ fn saturated_samples_are_left_out_not_averaged_in(engine: Engine) {
         .maps
         .pixels
         .iter()
-        .filter(|p| p.flags & flags::SATURATED != 0)
+        .filter(|p| p.flags.intersects(PixelFlags::SATURATED))
         .count();
     let [(rms1, _, worst1, found1, n1), (rms2, _, worst2, found2, n2)] = score(&r);
     eprintln!(
@@ -321,7 +321,9 @@ fn thin_plate_counts(
         let p = &r.maps.pixels[q];
         *hist.entry(p.flags).or_insert(0) += 1;
         total += 1;
-        if p.flags & (flags::UNRESOLVED | flags::OFFSET_MISMATCH) != 0 {
+        if p.flags
+            .intersects(PixelFlags::UNRESOLVED | PixelFlags::OFFSET_MISMATCH)
+        {
             flagged += 1;
         }
         if p.s[0][0].is_finite() && p.s[1][0].is_finite() {
@@ -522,7 +524,11 @@ struct Agreement {
     worst_sd: f64,
 }
 
-fn agreement(a: &SpectralMaps, b: &SpectralMaps, mask: impl Fn(u16) -> u16) -> Agreement {
+fn agreement(
+    a: &SpectralMaps,
+    b: &SpectralMaps,
+    mask: impl Fn(PixelFlags) -> PixelFlags,
+) -> Agreement {
     let mut out = Agreement {
         worst: 0.0,
         compared: 0,
@@ -580,8 +586,8 @@ fn the_statistics_give_the_series_answers() {
         differ,
         ..
     } = agreement(&a.maps, &b.maps, |f| {
-        if f & flags::NO_SIGNAL != 0 {
-            f & !flags::OUT_OF_BAND
+        if f.intersects(PixelFlags::NO_SIGNAL) {
+            f & !PixelFlags::OUT_OF_BAND
         } else {
             f
         }
@@ -633,7 +639,7 @@ fn statistics_flag_points_outside_their_band_never_guess() {
             };
             let m = &maps.pixels[q];
             total += 1;
-            if m.flags & flags::OUT_OF_BAND != 0 {
+            if m.flags.intersects(PixelFlags::OUT_OF_BAND) {
                 out_of_band += 1;
             }
             for (k, t) in [f, b].iter().enumerate() {

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use mfd::pipeline::{Reconstruction, SurfaceStage};
-use mfd::solve::spectral::{flags, SpectralMaps};
+use mfd::solve::spectral::{PixelFlags, SpectralMaps};
 
 /// Writes a reconstruction into `out` and prints what it found; a surface
 /// stage that could not run is the command's error, after the spectral maps
@@ -44,37 +44,33 @@ fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {
         median(0),
         median(1)
     );
-    let names = [
-        (flags::NO_SIGNAL, "no fringe signal"),
-        (flags::SATURATED, "saturated samples excluded"),
-        (flags::ONE_REFLECTION, "one reflection"),
-        (flags::THREE_REFLECTIONS, "three reflections"),
-        (flags::UNRESOLVED, "reflections not separable"),
-        (flags::OFFSET_MISMATCH, "offset disagrees with geometry"),
-        (flags::NOT_CONVERGED, "not converged"),
-        (flags::NEGATIVE_AMPLITUDE, "negative amplitude"),
-    ];
+    // NO_DATA pixels are not counted; OUT_OF_BAND is told apart below.
+    let names = PixelFlags::MEANINGS
+        .into_iter()
+        .filter(|(bit, _)| !bit.intersects(PixelFlags::NO_DATA | PixelFlags::OUT_OF_BAND));
     for (bit, name) in names {
         let n = maps
             .pixels
             .iter()
-            .filter(|p| p.flags & bit != 0 && p.flags & flags::NO_DATA == 0)
+            .filter(|p| p.flags.intersects(bit) && !p.flags.intersects(PixelFlags::NO_DATA))
             .count();
         if n > 0 {
             println!("  {n} pixels: {name}");
         }
     }
-    let count = |f: &dyn Fn(u16) -> bool| {
+    let count = |f: &dyn Fn(PixelFlags) -> bool| {
         maps.pixels
             .iter()
-            .filter(|p| p.flags & flags::NO_DATA == 0 && f(p.flags))
+            .filter(|p| !p.flags.intersects(PixelFlags::NO_DATA) && f(p.flags))
             .count()
     };
-    let left = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL == 0);
+    let left =
+        count(&|f| f.intersects(PixelFlags::OUT_OF_BAND) && !f.intersects(PixelFlags::NO_SIGNAL));
     if left > 0 {
         println!("  {left} pixels: signal or fit outside the statistics engine's band");
     }
-    let quiet = count(&|f| f & flags::OUT_OF_BAND != 0 && f & flags::NO_SIGNAL != 0);
+    let quiet =
+        count(&|f| f.intersects(PixelFlags::OUT_OF_BAND) && f.intersects(PixelFlags::NO_SIGNAL));
     if quiet + left > fitted / 2 {
         println!(
             "  most pixels show no signal within the band the statistics engine keeps: the \

@@ -10,7 +10,7 @@ use mfd::acquire::acquisition::Acquisition;
 use mfd::optics::station::Station;
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::{self, Input, Options, ScreenPoints};
-use mfd::solve::spectral::SpectralConfig;
+use mfd::solve::spectral::{PixelFlags, SpectralConfig};
 
 /// Arguments of `mfd reconstruct`.
 #[derive(Args)]
@@ -29,18 +29,10 @@ pub struct ReconstructArgs {
     /// either the scale is estimated from the residuals.
     #[arg(long, requires = "screen_coords")]
     screen_std: Option<PathBuf>,
-    /// Output folder: screen_coords.npy [rows, cols, 2, 2] (u, v of front and
-    /// back, screen px, NaN where not found), screen_std.npy (their standard
-    /// deviations, px), screen_cov.npy [rows, cols, 4, 4] (covariance of u1,
-    /// v1, u2, v2, px²), amplitudes.npy [rows, cols, 4] (A, B1, B2, B3 in
-    /// counts), tau_max.npy, residual_rms.npy (counts), separation_bins.npy
-    /// (front–back separation in Fourier bins), reflections.npy (u8: model
-    /// chosen, 0–3), flags.npy (u16 bits: 1 no data, 2 no fringe signal,
-    /// 4 saturated samples excluded, 8 one reflection, 16 three reflections,
-    /// 32 reflections not separable, 64 offset disagrees with the geometry,
-    /// 128 not converged, 256 negative amplitude, 512 outside the band the
-    /// statistics engine keeps).
-    #[arg(long)]
+    /// Output folder: the spectral maps (screen_coords.npy, screen_std.npy,
+    /// screen_cov.npy, quality maps, flags.npy) and the surfaces
+    /// (surfaces.json, height maps, pictures, summary.json).
+    #[arg(long, long_help = out_help())]
     out: PathBuf,
     /// Station file; default: the one the acquisition names.
     #[arg(long)]
@@ -139,4 +131,23 @@ fn from_screen_coords(
         &mut |_, _| {},
     )?;
     super::output::write_and_print(&rec, &args.out)
+}
+
+/// `--out`'s long help: every file, with the flag bits of `flags.npy` from
+/// the library's own table.
+fn out_help() -> String {
+    let bits: Vec<String> = PixelFlags::MEANINGS
+        .iter()
+        .map(|(bit, meaning)| format!("{} {meaning}", bit.bits()))
+        .collect();
+    format!(
+        "Output folder: screen_coords.npy [rows, cols, 2, 2] (u, v of front and back, screen \
+         px, NaN where not found), screen_std.npy (their standard deviations, px), \
+         screen_cov.npy [rows, cols, 4, 4] (covariance of u1, v1, u2, v2, px²), amplitudes.npy \
+         [rows, cols, 4] (A, B1, B2, B3 in counts), tau_max.npy, residual_rms.npy (counts), \
+         separation_bins.npy (front–back separation in Fourier bins), reflections.npy (u8: \
+         model chosen, 0–3), flags.npy (u16 bits: {}); then surfaces.json (mfd-surfaces/1), \
+         front/back_height_nm.npy, front/back.png and *_coefficients.png, summary.json.",
+        bits.join(", ")
+    )
 }

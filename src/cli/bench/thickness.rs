@@ -9,7 +9,7 @@ use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::bound::two_reflection_bound;
-use mfd::solve::spectral::{flags, SpectralConfig, SpectralSolver};
+use mfd::solve::spectral::{PixelFlags, SpectralConfig, SpectralSolver};
 
 /// Arguments of `mfd bench thickness`.
 #[derive(Args)]
@@ -97,7 +97,9 @@ fn row(
         };
         total += 1;
         let r = &maps.pixels[q];
-        if r.flags & (flags::UNRESOLVED | flags::OFFSET_MISMATCH) != 0 {
+        if r.flags
+            .intersects(PixelFlags::UNRESOLVED | PixelFlags::OFFSET_MISMATCH)
+        {
             flagged += 1;
         }
         let ax = solver.design().axes[0];

@@ -4,12 +4,12 @@
 
 use rayon::prelude::*;
 
-use super::flags;
 use super::model::{Design, SeriesSamples};
 use super::periodogram::SpectrumPlans;
 use super::pixel::{fit_samples_seeded, PixelContext, PixelFits, Seed};
 use super::prior::GeometryPrior;
 use super::statistics::{prefetch_lines, Statistics};
+use super::PixelFlags;
 use crate::optics::trace::TracedView;
 
 /// How the fits of a batch are run: the settings they share.
@@ -211,7 +211,7 @@ impl<'a> FitBatch<'a> {
                 Some((data, excluded)) => fit_samples_seeded(&ctx, &data, excluded, seed, out),
                 None => {
                     *out = PixelFits::none();
-                    out.base.flags = flags::SATURATED | flags::NO_DATA;
+                    out.base.flags = PixelFlags::SATURATED | PixelFlags::NO_DATA;
                     None
                 }
             };

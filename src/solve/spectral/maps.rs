@@ -99,7 +99,7 @@ impl SpectralMaps {
         npy::write_u16(
             &dir.join("flags.npy"),
             &[h, w],
-            &px.iter().map(|p| p.flags).collect::<Vec<u16>>(),
+            &px.iter().map(|p| p.flags.bits()).collect::<Vec<u16>>(),
         )?;
         npy::write_u16(
             &dir.join("iterations.npy"),

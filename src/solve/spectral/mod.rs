@@ -45,31 +45,57 @@ use nalgebra::DMatrix;
 
 use model::Params;
 
-/// Per-pixel flag bits (`flags.npy`).
-pub mod flags {
-    /// Outside the pixels the station predicts to see the element, or too few samples.
-    pub const NO_DATA: u16 = 1;
-    /// No fringe signal in at least one direction.
-    pub const NO_SIGNAL: u16 = 2;
-    /// Saturated or clipped samples were excluded from the fit.
-    pub const SATURATED: u16 = 4;
-    /// One reflection modelled (opaque element, reference flat, AR-coated back).
-    pub const ONE_REFLECTION: u16 = 8;
-    /// Three reflections modelled (second internal round trip, paper §5.1b).
-    pub const THREE_REFLECTIONS: u16 = 16;
-    /// The reflections cannot be separated with this schedule: both NaN.
-    pub const UNRESOLVED: u16 = 32;
-    /// The fitted back-minus-front offset disagrees with the geometry by more
-    /// than half its size: both NaN rather than a possibly swapped answer.
-    pub const OFFSET_MISMATCH: u16 = 64;
-    /// Levenberg–Marquardt stopped at its iteration cap.
-    pub const NOT_CONVERGED: u16 = 128;
-    /// Every model needed a negative amplitude: no physical fit.
-    pub const NEGATIVE_AMPLITUDE: u16 = 256;
-    /// Statistics engine: the fit left the band of screen positions around
-    /// the station's prediction that the statistics keep, or (with
-    /// [`NO_SIGNAL`]) the band holds no signal — it may lie outside: both NaN.
-    pub const OUT_OF_BAND: u16 = 512;
+bitflags::bitflags! {
+    /// Per-pixel flags (`flags.npy`, the bits as `u16`).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
+    pub struct PixelFlags: u16 {
+        /// Outside the pixels the station predicts to see the element, or too few samples.
+        const NO_DATA = 1;
+        /// No fringe signal in at least one direction.
+        const NO_SIGNAL = 2;
+        /// Saturated or clipped samples were excluded from the fit.
+        const SATURATED = 4;
+        /// One reflection modelled (opaque element, reference flat, AR-coated back).
+        const ONE_REFLECTION = 8;
+        /// Three reflections modelled (second internal round trip, paper §5.1b).
+        const THREE_REFLECTIONS = 16;
+        /// The reflections cannot be separated with this schedule: both NaN.
+        const UNRESOLVED = 32;
+        /// The fitted back-minus-front offset disagrees with the geometry by more
+        /// than half its size: both NaN rather than a possibly swapped answer.
+        const OFFSET_MISMATCH = 64;
+        /// Levenberg–Marquardt stopped at its iteration cap.
+        const NOT_CONVERGED = 128;
+        /// Every model needed a negative amplitude: no physical fit.
+        const NEGATIVE_AMPLITUDE = 256;
+        /// Statistics engine: the fit left the band of screen positions around
+        /// the station's prediction that the statistics keep, or (with
+        /// `NO_SIGNAL`) the band holds no signal — it may lie outside: both NaN.
+        const OUT_OF_BAND = 512;
+    }
+}
+
+impl PixelFlags {
+    /// Every flag with what it means in a few words: the table of
+    /// `mfd reconstruct --help` and of the printed summary.
+    pub const MEANINGS: [(PixelFlags, &'static str); 10] = [
+        (PixelFlags::NO_DATA, "no data"),
+        (PixelFlags::NO_SIGNAL, "no fringe signal"),
+        (PixelFlags::SATURATED, "saturated samples excluded"),
+        (PixelFlags::ONE_REFLECTION, "one reflection"),
+        (PixelFlags::THREE_REFLECTIONS, "three reflections"),
+        (PixelFlags::UNRESOLVED, "reflections not separable"),
+        (
+            PixelFlags::OFFSET_MISMATCH,
+            "offset disagrees with the geometry",
+        ),
+        (PixelFlags::NOT_CONVERGED, "not converged"),
+        (PixelFlags::NEGATIVE_AMPLITUDE, "negative amplitude"),
+        (
+            PixelFlags::OUT_OF_BAND,
+            "outside the band the statistics engine keeps",
+        ),
+    ];
 }
 
 /// The solver's answer for one pixel.
@@ -92,8 +118,8 @@ pub struct PixelResult {
     pub separation_bins: f64,
     /// Number of reflections in the chosen model (0: none).
     pub model: u8,
-    /// [`flags`] bits.
-    pub flags: u16,
+    /// What the fit found or could not do.
+    pub flags: PixelFlags,
     /// LM iterations of the chosen model.
     pub iterations: u16,
 }
@@ -110,7 +136,7 @@ impl PixelResult {
             residual_rms: f64::NAN,
             separation_bins: f64::NAN,
             model: 0,
-            flags: 0,
+            flags: PixelFlags::empty(),
             iterations: 0,
         }
     }
@@ -140,5 +166,22 @@ impl PixelResult {
                 self.cov[2 + b][a] = c[(u0 + a, u1 + b)];
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod flag_tests {
+    use super::PixelFlags;
+
+    /// `flags.npy` keeps the bits it always had (other tools read them),
+    /// and the table of meanings names every flag once.
+    #[test]
+    fn flag_bits_are_the_files_and_every_flag_has_a_meaning() {
+        let bits: Vec<u16> = PixelFlags::MEANINGS.iter().map(|(f, _)| f.bits()).collect();
+        assert_eq!(bits, [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]);
+        let union = PixelFlags::MEANINGS
+            .iter()
+            .fold(PixelFlags::empty(), |acc, (f, _)| acc | *f);
+        assert_eq!(union, PixelFlags::all());
     }
 }

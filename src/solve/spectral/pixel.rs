@@ -12,7 +12,7 @@ use super::model::{
     levenberg_marquardt, Design, Fit, ParamCholesky, Params, Samples, MAX_REFLECTIONS,
 };
 use super::periodogram::SpectrumPlans;
-use super::{flags, PixelResult};
+use super::{PixelFlags, PixelResult};
 use crate::optics::trace::PixelPaths;
 
 mod finalize;
@@ -240,10 +240,10 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
 ) -> Option<Seed> {
     *out = PixelFits::none();
     if excluded > 0 {
-        out.base.flags |= flags::SATURATED;
+        out.base.flags |= PixelFlags::SATURATED;
     }
     if data.count() < 4 * (3 * MAX_REFLECTIONS + 2) {
-        out.base.flags |= flags::NO_DATA;
+        out.base.flags |= PixelFlags::NO_DATA;
         return None;
     }
     let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
@@ -347,22 +347,22 @@ fn searched_fits<S: Samples + ?Sized>(
     for d in 0..ctx.design.axes.len() {
         match data.peak(d) {
             Some((mu, ratio)) if ratio >= DETECTION_RATIO && mu.is_nan() => {
-                base.flags |= flags::OUT_OF_BAND;
+                base.flags |= PixelFlags::OUT_OF_BAND;
                 return None;
             }
             Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(mu),
             _ => {
-                base.flags |= flags::NO_SIGNAL;
+                base.flags |= PixelFlags::NO_SIGNAL;
                 if data.band_limited() {
                     // No signal within the band: it may lie outside.
-                    base.flags |= flags::OUT_OF_BAND;
+                    base.flags |= PixelFlags::OUT_OF_BAND;
                 }
                 return None;
             }
         }
     }
     let Some(centre) = solve_centre(ctx, &mus) else {
-        base.flags |= flags::NO_DATA;
+        base.flags |= PixelFlags::NO_DATA;
         return None;
     };
     let one = fit_from(ctx, data, &[start(1, &[centre], ctx.kappa0)]);

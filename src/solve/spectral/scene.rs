@@ -5,12 +5,12 @@ use rayon::prelude::*;
 
 use super::pixel::{PixelFits, Scored};
 use super::prior::GeometryPrior;
-use super::{flags, PixelResult};
+use super::{PixelFlags, PixelResult};
 
 /// The answer of a pixel that is not fitted.
 pub(super) fn no_data() -> PixelResult {
     PixelResult {
-        flags: flags::NO_DATA,
+        flags: PixelFlags::NO_DATA,
         ..PixelResult::empty()
     }
 }

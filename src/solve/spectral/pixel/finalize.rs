@@ -10,7 +10,7 @@ use nalgebra::DMatrix;
 use super::{spd_inverse, start, Candidate, PixelContext, RESOLVE_SIGMAS};
 use crate::optics::trace::{Miss, ScreenHit};
 use crate::solve::spectral::model::{Params, Samples};
-use crate::solve::spectral::{flags, PixelResult};
+use crate::solve::spectral::{PixelFlags, PixelResult};
 
 /// The pixel's result under the candidate's model: labels from physics,
 /// checks, uncertainties.
@@ -37,11 +37,11 @@ pub(super) fn finalize<S: Samples + ?Sized>(
     let p = fit.params;
     let n = data.count();
     if p.amp[..p.k].iter().any(|&b| b <= 0.0) {
-        out.flags |= flags::NEGATIVE_AMPLITUDE;
+        out.flags |= PixelFlags::NEGATIVE_AMPLITUDE;
         return out;
     }
     if !data.within_band(&p) {
-        out.flags |= flags::OUT_OF_BAND;
+        out.flags |= PixelFlags::OUT_OF_BAND;
         return out;
     }
     out.model = p.k as u8;
@@ -54,7 +54,7 @@ pub(super) fn finalize<S: Samples + ?Sized>(
     };
     out.amp[0] = p.offset;
     if !fit.converged {
-        out.flags |= flags::NOT_CONVERGED;
+        out.flags |= PixelFlags::NOT_CONVERGED;
     }
     let sigma2 = fit.sigma2(n);
     let cov = cand.inv.as_ref().map(|m| m * sigma2);
@@ -89,7 +89,7 @@ fn label_one(
     mut out: PixelResult,
 ) -> PixelResult {
     let (p, cov) = (fit.p, fit.cov);
-    out.flags |= flags::ONE_REFLECTION;
+    out.flags |= PixelFlags::ONE_REFLECTION;
     // No back path predicted: the one reflection is the front.
     let Some(d) = d12 else {
         out.set(0, p, 0, cov);
@@ -103,7 +103,7 @@ fn label_one(
     // Here p is `merged` itself (the one-reflection fit).
     let sd = expected_sd(&d, fit.sigma2);
     if RESOLVE_SIGMAS * sd > d[0].hypot(d[1]) {
-        out.flags |= flags::UNRESOLVED;
+        out.flags |= PixelFlags::UNRESOLVED;
         return out;
     }
     let dist = |q: Result<ScreenHit, Miss>| {
@@ -129,7 +129,7 @@ fn label_pair(
 ) -> PixelResult {
     let (p, cov) = (fit.p, fit.cov);
     if p.k == 3 {
-        out.flags |= flags::THREE_REFLECTIONS;
+        out.flags |= PixelFlags::THREE_REFLECTIONS;
         out.amp[3] = p.amp[2];
     }
     let d = d12.unwrap_or([1.0, 0.0]);
@@ -151,11 +151,11 @@ fn label_pair(
     let sd_expected = expected_sd(&d, fit.sigma2);
     let expected = d[0].hypot(d[1]);
     if RESOLVE_SIGMAS * sd.max(sd_expected) > expected {
-        out.flags |= flags::UNRESOLVED;
+        out.flags |= PixelFlags::UNRESOLVED;
         return out;
     }
     if (sep[0] - d[0]).hypot(sep[1] - d[1]) > 0.5 * expected + 3.0 * sd {
-        out.flags |= flags::OFFSET_MISMATCH;
+        out.flags |= PixelFlags::OFFSET_MISMATCH;
         return out;
     }
     out.set(0, p, i0, cov);

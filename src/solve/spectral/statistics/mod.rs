@@ -25,7 +25,7 @@
 //! The least squares are then the series' own (same RSS, JᵀJ, Jᵀr to the
 //! interpolation tolerance), at O(Q) instead of O(frames) per evaluation,
 //! but only within the band: a point farther than the band from the
-//! station's prediction is flagged [`super::flags::OUT_OF_BAND`], never
+//! station's prediction is flagged [`super::PixelFlags::OUT_OF_BAND`], never
 //! fitted with a wrong model.
 //!
 //! The parts: `nodes` (Chebyshev nodes and how many), `tables` (the
