@@ -184,47 +184,10 @@ impl Acquisition {
         let mut frames = Vec::with_capacity(file.frames.len());
         let mut files = Vec::new();
         for (index, f) in file.frames.iter().enumerate() {
-            if !(f.tau.is_finite() && f.tau > 0.0) {
-                return Err(invalid(
-                    format!("frame[{index}].tau"),
-                    format!("expected τ > 0, found {}", f.tau),
-                ));
-            }
-            if !f.direction_deg.is_finite() {
-                return Err(invalid(
-                    format!("frame[{index}].direction_deg"),
-                    "expected a finite angle".into(),
-                ));
-            }
-            let phase_rad = f.phase_rad.unwrap_or(0.0);
-            if !phase_rad.is_finite() {
-                return Err(invalid(
-                    format!("frame[{index}].phase_rad"),
-                    "expected a finite phase".into(),
-                ));
-            }
-            match (&file.stack, &f.file) {
-                (Some(_), Some(_)) => {
-                    return Err(invalid(
-                        format!("frame[{index}].file"),
-                        "a frame file is given although `stack` holds all frames".into(),
-                    ))
-                }
-                (None, None) => {
-                    return Err(invalid(
-                        format!("frame[{index}].file"),
-                        "missing: without `stack` every frame needs a file".into(),
-                    ))
-                }
-                (None, Some(name)) => files.push(dir.join(name)),
-                (Some(_), None) => {}
-            }
-            frames.push(FrameInfo {
-                index,
-                direction_deg: f.direction_deg,
-                tau: f.tau,
-                phase_rad,
-            });
+            let (info, name) = frame_entry(index, f, file.stack.is_some())
+                .map_err(|(field, problem)| invalid(field, problem))?;
+            files.extend(name.map(|n| dir.join(n)));
+            frames.push(info);
         }
         let source = match &file.stack {
             Some(name) => {
@@ -331,4 +294,48 @@ impl Acquisition {
             }
         }
     }
+}
+
+/// One `[[frame]]` table checked: τ > 0 and finite angles, and a `file`
+/// exactly when there is no `stack`. Returns the frame and its file; the
+/// error is the field (`frame[i].tau`, ...) and what is wrong with it.
+fn frame_entry(
+    index: usize,
+    f: &FrameEntry,
+    stack: bool,
+) -> Result<(FrameInfo, Option<&str>), (String, String)> {
+    let bad = |field: &str, problem: String| Err((format!("frame[{index}].{field}"), problem));
+    if !(f.tau.is_finite() && f.tau > 0.0) {
+        return bad("tau", format!("expected τ > 0, found {}", f.tau));
+    }
+    if !f.direction_deg.is_finite() {
+        return bad("direction_deg", "expected a finite angle".into());
+    }
+    let phase_rad = f.phase_rad.unwrap_or(0.0);
+    if !phase_rad.is_finite() {
+        return bad("phase_rad", "expected a finite phase".into());
+    }
+    let name = match (stack, &f.file) {
+        (true, Some(_)) => {
+            return bad(
+                "file",
+                "a frame file is given although `stack` holds all frames".into(),
+            )
+        }
+        (false, None) => {
+            return bad(
+                "file",
+                "missing: without `stack` every frame needs a file".into(),
+            )
+        }
+        (false, Some(name)) => Some(name.as_str()),
+        (true, None) => None,
+    };
+    let info = FrameInfo {
+        index,
+        direction_deg: f.direction_deg,
+        tau: f.tau,
+        phase_rad,
+    };
+    Ok((info, name))
 }

@@ -62,19 +62,7 @@ pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
     );
     let view = TracedView::trace(&station, &plate);
     let trace_s = t.elapsed().as_secs_f64();
-    let mut coords = view.screen_coords();
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed.wrapping_add(1000));
-    let mut std = vec![0.0; coords.len()];
-    for (k, (c, s)) in coords.iter_mut().zip(std.iter_mut()).enumerate() {
-        let sigma = if (k / 2) % 2 == 0 {
-            args.sigma1_px
-        } else {
-            args.sigma2_px
-        };
-        let z: f64 = StandardNormal.sample(&mut rng);
-        *c += sigma * z;
-        *s = sigma;
-    }
+    let (coords, std) = with_noise(view.screen_coords(), args);
     let noisy = args.sigma1_px > 0.0 || args.sigma2_px > 0.0;
     let unc = if noisy {
         Uncertainty::Std(&std)
@@ -126,4 +114,22 @@ pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
         "threads": rayon::current_num_threads(),
     }));
     Ok(())
+}
+
+/// The traced points with Gaussian noise of σ1 on S1's and σ2 on S2's
+/// coordinates (seeded), and those σ per coordinate.
+fn with_noise(mut coords: Vec<f64>, args: &SurfaceBenchArgs) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed.wrapping_add(1000));
+    let mut std = vec![0.0; coords.len()];
+    for (k, (c, s)) in coords.iter_mut().zip(std.iter_mut()).enumerate() {
+        let sigma = if (k / 2) % 2 == 0 {
+            args.sigma1_px
+        } else {
+            args.sigma2_px
+        };
+        let z: f64 = StandardNormal.sample(&mut rng);
+        *c += sigma * z;
+        *s = sigma;
+    }
+    (coords, std)
 }

@@ -100,7 +100,10 @@ pub struct SurfaceSolution {
     pub condition_number: f64,
 }
 
-/// Runs every stage on `obs`.
+/// Runs every stage on `obs`: the front from its slopes, the back on S2,
+/// the joint fit, outliers out and refit, the term choice and its refit.
+/// (About 80 lines: the sequence of stages, each one call, reads best
+/// top to bottom in one place.)
 ///
 /// # Errors
 /// [`SurfaceError`] when a stage cannot proceed (no data, ill-conditioned).
@@ -116,26 +119,7 @@ pub fn reconstruct(
     } else {
         obs
     };
-    let e = &station.element;
-    let (radius, centre) = (
-        e.aperture_radius_mm,
-        [e.aperture_center_mm.x, e.aperture_center_mm.y],
-    );
-    let terms = opts.terms.unwrap_or(opts.max_terms).max(3);
-    let flat = ZernikeSurface::new(ZernikeBasis::new(terms, radius, centre)?, vec![0.0; terms])?;
-    let mut plate = Plate::new(station, flat.clone(), flat, opts.edge_margin_mm);
-    let mut stages = Vec::new();
-
-    let t = Instant::now();
-    let (front, rep) = front_from_slopes(obs, station, &plate, terms, opts.front_iter)?;
-    plate.front = front;
-    stages.push(Stage {
-        name: "front slopes",
-        seconds: t.elapsed().as_secs_f64(),
-        front: Some(rep),
-        lm: None,
-    });
-
+    let (terms, mut plate, mut stages) = front_stage(obs, station, opts)?;
     let mut layout = Layout {
         front_terms: terms,
         back_terms: terms,
@@ -189,35 +173,93 @@ pub fn reconstruct(
     };
     let mut choice = None;
     if opts.terms.is_none() {
-        let x = free_values(&plate, &layout);
-        let f = choose_terms(&normal, &layout, &x, false, obs.sigma_known);
-        let b = choose_terms(&normal, &layout, &x, true, obs.sigma_known);
-        if let (Some(f), Some(b)) = (f, b) {
-            if f.terms != layout.front_terms || b.terms != layout.back_terms {
-                plate.front = truncate(&plate.front, f.terms)?;
-                plate.back = truncate(&plate.back, b.terms)?;
-                layout.front_terms = f.terms;
-                layout.back_terms = if layout.fit_back { b.terms } else { f.terms };
-                if !layout.fit_back {
-                    plate.back = truncate(&plate.back, f.terms)?;
-                }
-                normal = lm_stage(
-                    obs,
-                    station,
-                    &mut plate,
-                    &layout,
-                    "joint (chosen terms)",
-                    opts,
-                    &mut stages,
-                )?;
-            }
-            choice = Some([f, b]);
+        let chosen = refit_chosen_terms(
+            obs,
+            station,
+            &mut plate,
+            &mut layout,
+            &normal,
+            opts,
+            &mut stages,
+        )?;
+        if let Some((terms, refitted)) = chosen {
+            normal = refitted.unwrap_or(normal);
+            choice = Some(terms);
         }
     }
     let mut sol = finish(plate, layout, normal, stages, choice, obs.sigma_known)?;
     sol.rejected = obs.rejected.clone();
     Ok(sol)
 }
+
+/// The first stage: the front from the S1 slopes with the starting term
+/// count, on a plate whose back is flat. Returns the term count, the plate
+/// and the stage's record.
+fn front_stage(
+    obs: &Observations,
+    station: &Station,
+    opts: &SurfaceOptions,
+) -> Result<(usize, Plate, Vec<Stage>), SurfaceError> {
+    let e = &station.element;
+    let (radius, centre) = (
+        e.aperture_radius_mm,
+        [e.aperture_center_mm.x, e.aperture_center_mm.y],
+    );
+    let terms = opts.terms.unwrap_or(opts.max_terms).max(3);
+    let flat = ZernikeSurface::new(ZernikeBasis::new(terms, radius, centre)?, vec![0.0; terms])?;
+    let mut plate = Plate::new(station, flat.clone(), flat, opts.edge_margin_mm);
+    let mut stages = Vec::new();
+
+    let t = Instant::now();
+    let (front, rep) = front_from_slopes(obs, station, &plate, terms, opts.front_iter)?;
+    plate.front = front;
+    stages.push(Stage {
+        name: "front slopes",
+        seconds: t.elapsed().as_secs_f64(),
+        front: Some(rep),
+        lm: None,
+    });
+
+    Ok((terms, plate, stages))
+}
+
+/// The term choice on the joint fit's normal equations (`normal`); where
+/// it differs from the fitted counts, the surfaces are truncated to it and
+/// fitted again ("joint (chosen terms)"). Returns the choice and, when
+/// refitted, the new normal equations; `None` when no choice was possible.
+fn refit_chosen_terms(
+    obs: &Observations,
+    station: &Station,
+    plate: &mut Plate,
+    layout: &mut Layout,
+    normal: &Normal,
+    opts: &SurfaceOptions,
+    stages: &mut Vec<Stage>,
+) -> Result<Option<ChosenTerms>, SurfaceError> {
+    let x = free_values(plate, layout);
+    let f = choose_terms(normal, layout, &x, false, obs.sigma_known);
+    let b = choose_terms(normal, layout, &x, true, obs.sigma_known);
+    let (Some(f), Some(b)) = (f, b) else {
+        return Ok(None);
+    };
+    let mut refitted = None;
+    if f.terms != layout.front_terms || b.terms != layout.back_terms {
+        plate.front = truncate(&plate.front, f.terms)?;
+        plate.back = truncate(&plate.back, b.terms)?;
+        layout.front_terms = f.terms;
+        layout.back_terms = if layout.fit_back { b.terms } else { f.terms };
+        if !layout.fit_back {
+            plate.back = truncate(&plate.back, f.terms)?;
+        }
+        let stage = "joint (chosen terms)";
+        refitted = Some(lm_stage(obs, station, plate, layout, stage, opts, stages)?);
+    }
+    Ok(Some(([f, b], refitted)))
+}
+
+/// The terms chosen for (front, back), and the normal equations of the
+/// refit when the choice changed the model.
+type ChosenTerms = ([TermChoice; 2], Option<Normal>);
 
 /// When the term count is the data's to choose: shrink the model (the
 /// back first, by full Noll orders, then the front) until its Jacobian at
