@@ -15,9 +15,9 @@ use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
 use mfd::acquire::live::{Counters, Measurement, Report, SequencerConfig, Start};
 use mfd::optics::station::Station;
-use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::{self, Input, Options};
-use mfd::sim::{MirroredDisplay, Renderer, ScreenState, SimFaults, SimParams, SimulatedCamera};
+use mfd::sim::{MirroredDisplay, ScreenState, SimFaults, SimParams, SimulatedCamera};
 
 /// Arguments of `mfd measure`.
 #[derive(Args, Clone)]
@@ -272,14 +272,11 @@ fn simulated_camera(
     screen: ScreenState,
 ) -> anyhow::Result<SimulatedCamera> {
     let (front, back) = super::load_surfaces(args.sim_surfaces.as_deref(), station)?;
-    let plate = Plate::new(station, front, back, DEFAULT_EDGE_MARGIN_MM);
-    let view = TracedView::trace(station, &plate);
     let params = SimParams {
         bit_depth: args.bit_depth,
         noise_frac: args.noise,
         ..SimParams::default()
     };
-    let renderer = Renderer::new(&view, &station.screen, params)?;
     let f = &args.faults;
     anyhow::ensure!(
         f.sim_latency_ms.is_finite() && f.sim_latency_ms >= 0.0,
@@ -297,7 +294,8 @@ fn simulated_camera(
         early_every: f.sim_early_every.filter(|&k| k > 0),
         disconnect_after: f.sim_disconnect_after,
     };
-    Ok(SimulatedCamera::new(renderer, screen, faults))
+    let camera = SimulatedCamera::of_plate(station, front, back, params, screen, faults)?;
+    Ok(camera)
 }
 
 fn run_session(measurement: &mut Measurement<'_>, stop: &AtomicBool) -> anyhow::Result<Report> {

@@ -77,6 +77,27 @@ impl std::fmt::Debug for SimulatedCamera {
 }
 
 impl SimulatedCamera {
+    /// The simulated station's camera for a plate with surfaces `front` and
+    /// `back` (traced with the default rim margin): it renders with
+    /// `params` whatever `screen` shows, with `faults` injected.
+    ///
+    /// # Errors
+    /// [`super::SimError`] when the renderer refuses `params`.
+    pub fn of_plate(
+        station: &crate::optics::station::Station,
+        front: crate::optics::zernike::ZernikeSurface,
+        back: crate::optics::zernike::ZernikeSurface,
+        params: super::SimParams,
+        screen: ScreenState,
+        faults: SimFaults,
+    ) -> Result<Self, super::SimError> {
+        use crate::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+        let plate = Plate::new(station, front, back, DEFAULT_EDGE_MARGIN_MM);
+        let view = TracedView::trace(station, &plate);
+        let renderer = Renderer::new(&view, &station.screen, params)?;
+        Ok(SimulatedCamera::new(renderer, screen, faults))
+    }
+
     /// A camera rendering with `renderer` whatever `screen` shows.
     pub fn new(renderer: Renderer, screen: ScreenState, faults: SimFaults) -> Self {
         let rng = Xoshiro256PlusPlus::seed_from_u64(faults.seed);
