@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod spectral;
+
 use std::path::PathBuf;
 
 /// The independent fixture folder, carried in the repository
