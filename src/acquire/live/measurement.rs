@@ -51,9 +51,9 @@ pub enum MeasurementError {
         "{source}; {recorded} of {total} frames are recorded in {dir} (continue with --resume)"
     )]
     Run {
-        /// What stopped it.
+        /// What stopped it (boxed: it is large, and rare).
         #[source]
-        source: LiveError,
+        source: Box<LiveError>,
         /// Frames recorded.
         recorded: usize,
         /// Frames of the schedule.
@@ -205,7 +205,7 @@ impl<'a> Measurement<'a> {
             log::warn!("stopping the camera: {e}");
         }
         result.map_err(|source| MeasurementError::Run {
-            source,
+            source: Box::new(source),
             recorded: self.recorder.recorded(),
             total: self.patterns.len(),
             dir: self.recorder.dir().display().to_string(),
