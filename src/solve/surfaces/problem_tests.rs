@@ -23,6 +23,7 @@ fn with_coeff(s: &ZernikeSurface, k: usize, delta: f64) -> ZernikeSurface {
 /// analytic entries are exact to ~1e-6 relative at worst; the difference
 /// quotient over ±1 nm has round-off ~1e-13 px against entries ~1e-3 px/nm.
 /// Bound: 1e-7 of the largest entry (measured: passes at 1e-8).
+/// (About 85 lines: one scenario, every Jacobian block compared in turn.)
 #[test]
 fn jacobian_matches_finite_differences() {
     let st = station();

@@ -110,7 +110,9 @@ struct GridSums {
 impl DirTables {
     /// The tables of direction `d`, whose frames are `frames` (indices into
     /// the design, capture order), for the pixels' centres `centres` (μ)
-    /// with band half-width `band` (μ).
+    /// with band half-width `band` (μ). (About 80 lines: the node counts,
+    /// the grid sums and the periodogram weights of one direction are built
+    /// in one pass over its frames; split, each part would walk them again.)
     fn new(
         design: &Design,
         d: usize,
