@@ -4,19 +4,23 @@
 //! The data flow one way, and the modules follow it:
 //!
 //! ```text
-//!  optics (station, zernike, trace) ──► acquire (patterns, cameras, display, live, acquisition)
+//!  optics (station, zernike, trace) ──► acquire (patterns, acquisition, cameras, display)
 //!                                            │ frames
 //!                                            ▼
-//!                     solve::spectral (S1, S2 per pixel) ──► solve::surfaces (Zernike front, back)
-//!                                                                   │
-//!                                                                   ▼
-//!                                                          report, formats (files, pictures)
+//!        solve::spectral (S1, S2 per pixel) ──► solve::surfaces (Zernike front, back)
+//!                                            │
+//!              live (sequencer, recorder, streaming solver) · pipeline (the stages as one call)
+//!                                            │
+//!                                            ▼
+//!                                   report, formats (files, pictures)
 //! ```
 //!
 //! - [`optics`]: the station's geometry, the surface model and the exact
 //!   forward model.
-//! - [`acquire`]: fringe patterns, cameras, the display, the live sequencer
-//!   and the recorded acquisition folder.
+//! - [`acquire`]: fringe patterns, cameras, the display and the recorded
+//!   acquisition folder.
+//! - [`live`]: a live measurement — the sequencer between display and
+//!   camera, the recorder and the streaming solver.
 //! - [`solve`]: the spectral stage and the surface solvers.
 //! - [`pipeline`]: the stages as one call, `reconstruct(input, station,
 //!   options)`, and the result folder it writes.
@@ -32,6 +36,7 @@ pub mod acquire;
 pub mod conventions;
 pub mod formats;
 pub mod kernels;
+pub mod live;
 pub mod optics;
 pub mod pipeline;
 pub mod report;

@@ -9,10 +9,10 @@ use std::time::Duration;
 
 use mfd::acquire::acquisition::Acquisition;
 use mfd::acquire::camera::{Camera, CameraConfig, CameraError, Frame, TriggerMode};
-use mfd::acquire::live::{
+use mfd::acquire::patterns::{Pattern, Schedule};
+use mfd::live::{
     acquire, Counters, FrameSink, LiveError, Recorder, Report, SequencerConfig, Session,
 };
-use mfd::acquire::patterns::{Pattern, Schedule};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{
@@ -292,7 +292,7 @@ impl FrameSink for Slow {
         "slow"
     }
 
-    fn accept(&mut self, index: usize, frame: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
+    fn accept(&mut self, index: usize, frame: &Frame) -> Result<(), mfd::live::SinkError> {
         std::thread::sleep(Duration::from_millis(8));
         self.seen.push(index);
         self.frames.push(frame.clone());
@@ -361,7 +361,7 @@ fn a_consumer_error_stops_the_run_and_is_reported() {
         fn name(&self) -> &'static str {
             "failing"
         }
-        fn accept(&mut self, index: usize, _: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
+        fn accept(&mut self, index: usize, _: &Frame) -> Result<(), mfd::live::SinkError> {
             if index == 9 {
                 return Err("disk full".into());
             }
@@ -408,10 +408,10 @@ fn a_consumer_failing_to_finish_is_reported_as_such() {
         fn name(&self) -> &'static str {
             "unflushable"
         }
-        fn accept(&mut self, _: usize, _: &Frame) -> Result<(), mfd::acquire::live::SinkError> {
+        fn accept(&mut self, _: usize, _: &Frame) -> Result<(), mfd::live::SinkError> {
             Ok(())
         }
-        fn finish(&mut self) -> Result<(), mfd::acquire::live::SinkError> {
+        fn finish(&mut self) -> Result<(), mfd::live::SinkError> {
             Err("disk full".into())
         }
     }

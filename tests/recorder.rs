@@ -11,8 +11,8 @@ use mfd::acquire::acquisition::{
     Acquisition, AcquisitionWriter, FrameInfo, FrameLayout, ManifestFile, MANIFEST,
 };
 use mfd::acquire::camera::Frame;
-use mfd::acquire::live::Recorder;
 use mfd::acquire::patterns::Pattern;
+use mfd::live::Recorder;
 use mfd::optics::station::Station;
 
 const W: u32 = 6;

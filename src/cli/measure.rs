@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::acquire::live::{Counters, Measurement, Report, SequencerConfig, Start};
+use mfd::live::{Counters, Measurement, Report, SequencerConfig, Start};
 use mfd::optics::station::Station;
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::{self, Input, Options};
