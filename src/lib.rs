@@ -33,6 +33,7 @@
 #![warn(missing_docs)]
 
 pub mod acquire;
+pub mod calibrate;
 pub mod conventions;
 pub mod formats;
 pub mod kernels;
