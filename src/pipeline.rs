@@ -236,6 +236,9 @@ pub fn reconstruct(
     options: &Options,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Reconstruction, PipelineError> {
+    // Every stage works in the element's own frame (station v2's pose);
+    // the surfaces come out in it, as the spec reports them.
+    let station = &station.element_frame();
     let first = match input {
         Input::Acquisition(acq) => {
             let t0 = Instant::now();

@@ -107,6 +107,7 @@ proptest! {
                 thickness_mm: thickness,
                 aperture_radius_mm: 25.5,
                 aperture_center_mm: nalgebra::Point2::origin(),
+                pose: mfd::optics::station::Pose::default(),
             },
         };
         let cam = mfd::optics::station::CameraProfile::load(&common::repo("hw/camera/baumer-txg12.toml")).unwrap();

@@ -6,7 +6,9 @@ use anyhow::Context;
 use clap::Args;
 use nalgebra::Point2;
 
-use mfd::optics::station::{CameraProfile, DisplayProfile, Element, SymmetricLayout};
+use mfd::optics::station::{
+    CameraProfile, DisplayProfile, Element, Pose, Station, SymmetricLayout,
+};
 
 /// Arguments of `mfd station`.
 #[derive(Args)]
@@ -39,6 +41,10 @@ pub struct StationArgs {
     /// Radius of the measured aperture, mm.
     #[arg(long, default_value_t = 25.5)]
     aperture_radius_mm: f64,
+    /// The element's tilt about world x, then y, degrees (`element.tilt_deg`
+    /// of `mfd-station/2`: an element mounted at an angle to the reference plane).
+    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
+    element_tilt_deg: Vec<f64>,
     /// Where to write the station.toml.
     #[arg(long)]
     out: PathBuf,
@@ -58,9 +64,15 @@ pub fn run(args: &StationArgs) -> anyhow::Result<()> {
             thickness_mm: args.thickness_mm,
             aperture_radius_mm: args.aperture_radius_mm,
             aperture_center_mm: Point2::origin(),
+            pose: Pose::default(),
         },
     };
-    let station = layout.build(&camera, &display)?;
+    let mut station = layout.build(&camera, &display)?;
+    if let [rx, ry] = args.element_tilt_deg[..] {
+        station.element.pose.tilt_deg = [rx, ry];
+        // Through the file form: the tilted station is checked as a loaded one is.
+        station = Station::from_file(&station.to_file(), &args.out)?;
+    }
     let header = format!(
         "# Built by `mfd station` from {} and {}:\n# camera {} mm and screen {} mm above the \
          element, axis {}° from the normal, f = {} mm.\n",

@@ -6,7 +6,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{Camera, Element, Screen, Station, StationError};
+use super::{Camera, CoverGlassFile, DistortionFile, Element, Screen, Station, StationError};
 
 /// Format tag of a camera profile.
 pub const CAMERA_PROFILE_FORMAT: &str = "mfd-camera-profile/1";
@@ -22,11 +22,17 @@ pub struct CameraProfile {
     /// Vendor and model.
     pub model: String,
     /// Sensor `[width, height]` in pixels.
+    #[serde(deserialize_with = "crate::formats::exact::array")]
     pub resolution: [u32; 2],
     /// Pixel pitch, µm.
     pub pixel_pitch_um: f64,
     /// Native ADC bit depth.
     pub bit_depth: u32,
+    /// `[distortion]`: the mounted lens's distortion, as in `mfd-station/2`'s
+    /// `[camera.distortion]` (optional; a station built from the profile
+    /// then is version 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<DistortionFile>,
 }
 
 /// A display model's fixed properties (`hw/display/*.toml`).
@@ -38,6 +44,7 @@ pub struct DisplayProfile {
     /// Vendor and model.
     pub model: String,
     /// Panel `[width, height]` in pixels.
+    #[serde(deserialize_with = "crate::formats::exact::array")]
     pub resolution: [u32; 2],
     /// Pixel pitch, mm.
     pub pixel_pitch_mm: f64,
@@ -47,6 +54,10 @@ pub struct DisplayProfile {
     pub gamma: f64,
     /// Time for the LCD to settle after a new frame is presented, ms.
     pub settle_ms: f64,
+    /// `[cover_glass]`: the glass in front of the pixels, as in
+    /// `mfd-station/2`'s `[screen.cover_glass]` (optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cover_glass: Option<CoverGlassFile>,
 }
 
 fn load_profile<T: serde::de::DeserializeOwned>(
@@ -130,6 +141,7 @@ pub fn bench_station(
         resolution: [48, 48],
         pixel_pitch_um: 10.0,
         bit_depth: 16,
+        distortion: None,
     };
     let display = DisplayProfile {
         format: "mfd-display-profile/1".into(),
@@ -139,6 +151,7 @@ pub fn bench_station(
         diagonal_in: 21.3,
         gamma: 2.2,
         settle_ms: 30.0,
+        cover_glass: None,
     };
     let element = Element {
         refractive_index: index,
@@ -163,6 +176,7 @@ impl SymmetricLayout {
             thickness_mm: 10.0,
             aperture_radius_mm: 25.5,
             aperture_center_mm: Point2::origin(),
+            pose: super::Pose::default(),
         }
     }
 
@@ -191,6 +205,7 @@ impl SymmetricLayout {
             width: w,
             height: h,
             principal_point_px: Point2::new(f64::from(w) / 2.0, f64::from(h) / 2.0),
+            distortion: None,
         };
         let [sw, sh] = display.resolution;
         let p = display.pixel_pitch_mm;
@@ -209,11 +224,19 @@ impl SymmetricLayout {
                 origin_mm: origin,
                 u_axis,
                 v_axis,
+                cover_glass: None,
             },
             element: self.element.clone(),
         };
         // Round-trip through the file form so a built station passes the very
-        // checks a loaded one does.
-        Station::from_file(&station.to_file(), Path::new("<built station>"))
+        // checks a loaded one does; the profiles' version-2 tables go in
+        // there, so they are validated exactly as a file's are.
+        let mut file = station.to_file();
+        if camera.distortion.is_some() || display.cover_glass.is_some() {
+            file.format = super::STATION_FORMAT_V2.to_string();
+            file.camera.distortion = camera.distortion.clone();
+            file.screen.cover_glass = display.cover_glass.clone();
+        }
+        Station::from_file(&file, Path::new("<built station>"))
     }
 }

@@ -1,11 +1,17 @@
-//! The station: pinhole camera, fringe screen and element, validated.
+//! The station: camera, fringe screen and element, validated.
 //!
-//! [`Station::load`] reads `station.toml` (spec `mfd-station/1`) and rejects
-//! impossible geometry with a [`StationError`] that names the file and field.
-//! All lengths are millimetres in the world frame (see [`crate::conventions`]).
+//! [`Station::load`] reads `station.toml` (spec `mfd-station/1` and `/2`)
+//! and rejects impossible geometry with a [`StationError`] that names the
+//! file and field. Version 2 adds the lens's [`Distortion`], the screen's
+//! [`CoverGlass`] and the element's [`Pose`]; without them a station is
+//! exactly version 1 (and is written as version 1). All lengths are
+//! millimetres in the world frame (see [`crate::conventions`]).
 
 mod build;
+mod cover_glass;
+mod distortion;
 mod file;
+mod pose;
 mod validate;
 
 use std::path::{Path, PathBuf};
@@ -13,7 +19,13 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 
 pub use build::{bench_station, CameraProfile, DisplayProfile, SymmetricLayout};
-pub use file::{CameraFile, ElementFile, ScreenFile, StationFile, STATION_FORMAT};
+pub use cover_glass::CoverGlass;
+pub use distortion::Distortion;
+pub use file::{
+    CameraFile, CoverGlassFile, DistortionFile, ElementFile, ScreenFile, StationFile,
+    STATION_FORMAT, STATION_FORMAT_V2,
+};
+pub use pose::Pose;
 
 /// What went wrong reading or checking a station.
 #[derive(Debug, thiserror::Error)]
@@ -27,8 +39,9 @@ pub enum StationError {
         #[source]
         source: std::io::Error,
     },
-    /// The file is not valid TOML for `mfd-station/1` (unknown or missing field, wrong type).
-    #[error("{path}: not a valid mfd-station/1 file: {source}")]
+    /// The file is not valid TOML for `mfd-station/1` or `/2` (unknown or
+    /// missing field, wrong type).
+    #[error("{path}: not a valid mfd-station/1 or /2 file: {source}")]
     Parse {
         /// The station file.
         path: PathBuf,
@@ -48,7 +61,8 @@ pub enum StationError {
     },
 }
 
-/// An ideal pinhole camera.
+/// A central-projection camera: a pinhole, with the lens's distortion
+/// where the station gives one.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Camera {
     /// Projection centre C, world frame, mm.
@@ -65,12 +79,17 @@ pub struct Camera {
     pub height: u32,
     /// Principal point `(cx, cy)` in pixels.
     pub principal_point_px: Point2<f64>,
+    /// The lens's distortion (station v2); `None` is the ideal pinhole.
+    pub distortion: Option<Distortion>,
 }
 
 impl Camera {
     /// Unit direction, world frame, of the ray through the centre of pixel
     /// (column `i`, row `j`), per the spec.
     pub fn ray_direction(&self, i: u32, j: u32) -> Unit<Vector3<f64>> {
+        if self.distortion.is_some() {
+            return self.ray_through(f64::from(i) + 0.5, f64::from(j) + 0.5);
+        }
         let p = self.pixel_pitch_mm;
         let v_cam = Vector3::new(
             (f64::from(i) + 0.5 - self.principal_point_px.x) * p,
@@ -78,6 +97,46 @@ impl Camera {
             self.focal_length_mm,
         );
         Unit::new_normalize(self.world_from_camera * v_cam)
+    }
+
+    /// Unit direction, world frame, of the ray that lands at the continuous
+    /// pixel position `(x_px, y_px)` (pixel-centre convention: the centre of
+    /// pixel `(i, j)` is `(i + 0.5, j + 0.5)`), through the distortion's
+    /// inverse. Validation guarantees the inverse over the sensor; outside
+    /// it, where Newton may not converge, the direction is NaN.
+    pub fn ray_through(&self, x_px: f64, y_px: f64) -> Unit<Vector3<f64>> {
+        let f = self.focal_px();
+        let xd = (x_px - self.principal_point_px.x) / f;
+        let yd = (y_px - self.principal_point_px.y) / f;
+        let (x, y) = match &self.distortion {
+            None => (xd, yd),
+            Some(d) => d.undistort(xd, yd).unwrap_or((f64::NAN, f64::NAN)),
+        };
+        Unit::new_unchecked((self.world_from_camera * Vector3::new(x, y, 1.0)).normalize())
+    }
+
+    /// The continuous pixel position where the world point `p` is imaged,
+    /// or `None` when it lies behind the camera.
+    pub fn project(&self, p: &Point3<f64>) -> Option<Point2<f64>> {
+        let q = self.world_from_camera.inverse() * (p - self.position_mm);
+        if q.z <= 0.0 {
+            return None;
+        }
+        let (x, y) = (q.x / q.z, q.y / q.z);
+        let (xd, yd) = match &self.distortion {
+            None => (x, y),
+            Some(d) => d.distort(x, y),
+        };
+        let f = self.focal_px();
+        Some(Point2::new(
+            self.principal_point_px.x + f * xd,
+            self.principal_point_px.y + f * yd,
+        ))
+    }
+
+    /// `F = focal_length_mm / pixel pitch`: the focal length in pixels.
+    pub fn focal_px(&self) -> f64 {
+        self.focal_length_mm / self.pixel_pitch_mm
     }
 
     /// The optical axis, world frame.
@@ -106,6 +165,8 @@ pub struct Screen {
     pub u_axis: Unit<Vector3<f64>>,
     /// Direction of increasing v, world frame.
     pub v_axis: Unit<Vector3<f64>>,
+    /// The glass in front of the pixels (station v2); `None`: bare pixels.
+    pub cover_glass: Option<CoverGlass>,
 }
 
 impl Screen {
@@ -137,6 +198,28 @@ impl Screen {
     pub fn centre(&self) -> Point3<f64> {
         self.world_point(f64::from(self.width) / 2.0, f64::from(self.height) / 2.0)
     }
+
+    /// The screen's unit normal on the side of `p` (the viewer's side).
+    pub fn normal_towards(&self, p: &Point3<f64>) -> Unit<Vector3<f64>> {
+        let n = self.normal();
+        if (p - self.origin_mm).dot(&n) >= 0.0 {
+            n
+        } else {
+            -n
+        }
+    }
+
+    /// The direction in air from `from` of the ray that lands at screen
+    /// coordinate `(u, v)`: straight at its world point for bare pixels,
+    /// bent by the cover glass otherwise. `None` when `from` is not in
+    /// front of the glass.
+    pub fn aim(&self, from: &Point3<f64>, u: f64, v: f64) -> Option<Unit<Vector3<f64>>> {
+        let target = self.world_point(u, v);
+        match &self.cover_glass {
+            None => Some(Unit::new_normalize(target - from)),
+            Some(g) => g.aim(&self.origin_mm, &self.normal_towards(from), from, &target),
+        }
+    }
 }
 
 /// The transparent plate under test (nominal geometry; the surfaces' shapes
@@ -151,6 +234,15 @@ pub struct Element {
     pub aperture_radius_mm: f64,
     /// Centre of the reported aperture `(x, y)`, mm.
     pub aperture_center_mm: Point2<f64>,
+    /// Where the element's own frame sits (station v2); identity: on the reference plane.
+    pub pose: Pose,
+}
+
+impl Element {
+    /// The pose's pivot `c = (aperture_center_mm, 0)`.
+    pub fn pivot(&self) -> Point3<f64> {
+        Point3::new(self.aperture_center_mm.x, self.aperture_center_mm.y, 0.0)
+    }
 }
 
 /// A validated station.
@@ -189,6 +281,35 @@ impl Station {
         Self::from_file(&file, path)
     }
 
+    /// The same station in the element's own frame (its pose the
+    /// identity): the frame every stage traces, fits and reports in. A
+    /// station whose element stands on the reference plane comes back
+    /// unchanged, bit for bit.
+    pub fn element_frame(&self) -> Station {
+        let pose = self.element.pose;
+        if pose.is_identity() {
+            return self.clone();
+        }
+        let c = self.element.pivot();
+        let back = pose.rotation().inverse();
+        let mut s = self.clone();
+        s.camera.position_mm = pose.to_element(&c, &self.camera.position_mm);
+        s.camera.world_from_camera = back * self.camera.world_from_camera;
+        s.screen.origin_mm = pose.to_element(&c, &self.screen.origin_mm);
+        s.screen.u_axis = Unit::new_normalize(back * self.screen.u_axis.into_inner());
+        s.screen.v_axis = Unit::new_normalize(back * self.screen.v_axis.into_inner());
+        s.element.pose = Pose::default();
+        s
+    }
+
+    /// Whether any version-2 field is in use (the writer then writes
+    /// `mfd-station/2`).
+    pub fn needs_version_2(&self) -> bool {
+        self.camera.distortion.is_some()
+            || self.screen.cover_glass.is_some()
+            || !self.element.pose.is_identity()
+    }
+
     /// Validates the on-disk form.
     ///
     /// # Errors
@@ -201,8 +322,15 @@ impl Station {
     pub fn to_file(&self) -> StationFile {
         let r: &Matrix3<f64> = self.camera.world_from_camera.matrix();
         let c = &self.camera;
+        let v2 = self.needs_version_2();
+        let pose = &self.element.pose;
         StationFile {
-            format: STATION_FORMAT.to_string(),
+            format: if v2 {
+                STATION_FORMAT_V2
+            } else {
+                STATION_FORMAT
+            }
+            .to_string(),
             camera: CameraFile {
                 position_mm: c.position_mm.coords.into(),
                 rotation: [0, 1, 2].map(|row| [r[(row, 0)], r[(row, 1)], r[(row, 2)]]),
@@ -210,6 +338,11 @@ impl Station {
                 pixel_pitch_um: c.pixel_pitch_mm * 1000.0,
                 resolution: [c.width, c.height],
                 principal_point_px: Some([c.principal_point_px.x, c.principal_point_px.y]),
+                distortion: c.distortion.map(|d| DistortionFile {
+                    model: file::BROWN_CONRADY.to_string(),
+                    k: Some(d.k),
+                    p: Some(d.p),
+                }),
             },
             screen: ScreenFile {
                 resolution: [self.screen.width, self.screen.height],
@@ -217,6 +350,10 @@ impl Station {
                 origin_mm: self.screen.origin_mm.coords.into(),
                 u_axis: self.screen.u_axis.into_inner().into(),
                 v_axis: self.screen.v_axis.into_inner().into(),
+                cover_glass: self.screen.cover_glass.map(|g| CoverGlassFile {
+                    thickness_mm: g.thickness_mm,
+                    refractive_index: g.refractive_index,
+                }),
             },
             element: ElementFile {
                 refractive_index: self.element.refractive_index,
@@ -226,11 +363,13 @@ impl Station {
                     self.element.aperture_center_mm.x,
                     self.element.aperture_center_mm.y,
                 ]),
+                offset_mm: (!pose.is_identity()).then(|| pose.offset_mm.into()),
+                tilt_deg: (!pose.is_identity()).then_some(pose.tilt_deg),
             },
         }
     }
 
-    /// TOML text of this station (`mfd-station/1`).
+    /// TOML text of this station (`mfd-station/1`, or `/2` when a version-2 field is used).
     pub fn to_toml_string(&self) -> String {
         // Serialising plain structs of numbers and strings cannot fail.
         toml::to_string(&self.to_file()).unwrap_or_default()

@@ -5,7 +5,11 @@ use std::path::Path;
 
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 
-use super::{Camera, Element, Screen, Station, StationError, StationFile, STATION_FORMAT};
+use super::file::BROWN_CONRADY;
+use super::{
+    Camera, CoverGlass, Distortion, Element, Pose, Screen, Station, StationError, StationFile,
+    STATION_FORMAT, STATION_FORMAT_V2,
+};
 
 /// Tolerance on orthonormality of the rotation and of the screen axes.
 /// Station files are written with ~16 significant digits by programs, but a
@@ -64,21 +68,126 @@ impl Check<'_> {
 
 pub(super) fn station(file: &StationFile, path: &Path) -> Result<Station, StationError> {
     let check = Check { path };
-    if file.format != STATION_FORMAT {
+    if file.format != STATION_FORMAT && file.format != STATION_FORMAT_V2 {
         return check.fail(
             "format",
-            format!("expected \"{STATION_FORMAT}\", found \"{}\"", file.format),
+            format!(
+                "expected \"{STATION_FORMAT}\" or \"{STATION_FORMAT_V2}\", found \"{}\"",
+                file.format
+            ),
         );
     }
-    let camera = camera(&check, file)?;
+    if file.format == STATION_FORMAT {
+        version_1_only(&check, file)?;
+    }
+    let mut camera = camera(&check, file)?;
+    camera.distortion = distortion(&check, file, &camera)?;
     let screen = screen(&check, file)?;
     let element = element(&check, file)?;
     geometry(&check, &camera, &screen)?;
-    Ok(Station {
+    let station = Station {
         camera,
         screen,
         element,
-    })
+    };
+    if !station.element.pose.is_identity() {
+        let local = station.element_frame();
+        if geometry(&check, &local.camera, &local.screen).is_err() {
+            return check.fail(
+                "element.tilt_deg",
+                format!(
+                    "the element's pose (offset {:?} mm, tilt {:?}°) turns its front away \
+                     from the camera or the screen: both must stay on the front's side, \
+                     looking down at it",
+                    station.element.pose.offset_mm.as_slice(),
+                    station.element.pose.tilt_deg
+                ),
+            );
+        }
+    }
+    Ok(station)
+}
+
+/// A version-1 file must not use version-2 fields.
+fn version_1_only(check: &Check, file: &StationFile) -> Result<(), StationError> {
+    let used = [
+        ("camera.distortion", file.camera.distortion.is_some()),
+        ("screen.cover_glass", file.screen.cover_glass.is_some()),
+        ("element.offset_mm", file.element.offset_mm.is_some()),
+        ("element.tilt_deg", file.element.tilt_deg.is_some()),
+    ];
+    match used.iter().find(|(_, u)| *u) {
+        Some((field, _)) => check.fail(
+            field,
+            format!(
+                "a version-2 field in a \"{STATION_FORMAT}\" file: write \
+                 format = \"{STATION_FORMAT_V2}\" to use it"
+            ),
+        ),
+        None => Ok(()),
+    }
+}
+
+/// Round-trip points per sensor side when checking the distortion's inverse.
+const INVERSE_GRID: u32 = 17;
+
+fn distortion(
+    check: &Check,
+    file: &StationFile,
+    camera: &Camera,
+) -> Result<Option<Distortion>, StationError> {
+    let Some(d) = &file.camera.distortion else {
+        return Ok(None);
+    };
+    if d.model != BROWN_CONRADY {
+        return check.fail(
+            "camera.distortion.model",
+            format!("expected \"{BROWN_CONRADY}\", found \"{}\"", d.model),
+        );
+    }
+    let k = d.k.unwrap_or([0.0; 3]);
+    let p = d.p.unwrap_or([0.0; 2]);
+    check.finite("camera.distortion.k", &k)?;
+    check.finite("camera.distortion.p", &p)?;
+    let dist = Distortion { k, p };
+    if dist.is_zero() {
+        return Ok(None);
+    }
+    let f = camera.focal_px();
+    let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+    let c = camera.principal_point_px;
+    let rd_max = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+        .iter()
+        .map(|&(x, y)| ((x - c.x) / f).hypot((y - c.y) / f))
+        .fold(0.0, f64::max);
+    if let Some(problem) = dist.not_monotone_below(rd_max) {
+        return check.fail("camera.distortion.k", problem);
+    }
+    // The spec's condition is on the radial part; the tangential terms can
+    // still fold the map. Newton from every point of a grid over the whole
+    // sensor (edges included) must converge and distort back to it.
+    for a in 0..=INVERSE_GRID {
+        for b in 0..=INVERSE_GRID {
+            let xd = (w * f64::from(a) / f64::from(INVERSE_GRID) - c.x) / f;
+            let yd = (h * f64::from(b) / f64::from(INVERSE_GRID) - c.y) / f;
+            let ok = dist.undistort(xd, yd).is_some_and(|(x, y)| {
+                let j = dist.jacobian(x, y);
+                j[0][0] * j[1][1] - j[0][1] * j[1][0] > 0.0
+            });
+            if !ok {
+                return check.fail(
+                    "camera.distortion",
+                    format!(
+                        "the distortion's inverse is not unique over the sensor: at pixel \
+                         ({:.0}, {:.0}) Newton finds no ideal point with a non-folding map",
+                        xd * f + c.x,
+                        yd * f + c.y
+                    ),
+                );
+            }
+        }
+    }
+    Ok(Some(dist))
 }
 
 fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
@@ -115,6 +224,7 @@ fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
         width: w,
         height: h,
         principal_point_px: Point2::from(pp),
+        distortion: None,
     })
 }
 
@@ -132,6 +242,25 @@ fn screen(check: &Check, file: &StationFile) -> Result<Screen, StationError> {
             format!("expected perpendicular to screen.u_axis, u·v = {dot:.3e}"),
         );
     }
+    let cover_glass = match &s.cover_glass {
+        None => None,
+        Some(g) => {
+            check.positive("screen.cover_glass.thickness_mm", g.thickness_mm)?;
+            if !(g.refractive_index.is_finite() && g.refractive_index > 1.0) {
+                return check.fail(
+                    "screen.cover_glass.refractive_index",
+                    format!(
+                        "expected a finite index > 1 (glass in air), found {}",
+                        g.refractive_index
+                    ),
+                );
+            }
+            Some(CoverGlass {
+                thickness_mm: g.thickness_mm,
+                refractive_index: g.refractive_index,
+            })
+        }
+    };
     Ok(Screen {
         width: s.resolution[0],
         height: s.resolution[1],
@@ -139,6 +268,7 @@ fn screen(check: &Check, file: &StationFile) -> Result<Screen, StationError> {
         origin_mm: Point3::from(s.origin_mm),
         u_axis,
         v_axis,
+        cover_glass,
     })
 }
 
@@ -157,11 +287,25 @@ fn element(check: &Check, file: &StationFile) -> Result<Element, StationError> {
     check.positive("element.aperture_radius_mm", e.aperture_radius_mm)?;
     let centre = e.aperture_center_mm.unwrap_or([0.0, 0.0]);
     check.finite("element.aperture_center_mm", &centre)?;
+    let offset = e.offset_mm.unwrap_or([0.0; 3]);
+    let tilt = e.tilt_deg.unwrap_or([0.0; 2]);
+    check.finite("element.offset_mm", &offset)?;
+    check.finite("element.tilt_deg", &tilt)?;
+    if let Some(t) = tilt.iter().find(|t| t.abs() >= 90.0) {
+        return check.fail(
+            "element.tilt_deg",
+            format!("expected tilts within ±90° (degrees, not radians?), found {t}"),
+        );
+    }
     Ok(Element {
         refractive_index: e.refractive_index,
         thickness_mm: e.thickness_mm,
         aperture_radius_mm: e.aperture_radius_mm,
         aperture_center_mm: Point2::from(centre),
+        pose: Pose {
+            offset_mm: Vector3::from(offset),
+            tilt_deg: tilt,
+        },
     })
 }
 

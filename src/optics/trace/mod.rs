@@ -73,6 +73,8 @@ pub struct TracedView {
 impl TracedView {
     /// Traces every pixel of the station's camera through `plate` (all cores).
     pub fn trace(station: &Station, plate: &Plate) -> Self {
+        // The plate is traced in the element's own frame (station v2's pose).
+        let station = &station.element_frame();
         let cam = &station.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
         let pixels: Vec<PixelPaths> = (0..w * h)

@@ -80,8 +80,24 @@ pub struct PixelPaths {
     pub third: PathOutcome,
 }
 
-/// Intersects the screen plane and converts to `(u, v)`.
+/// Intersects the screen plane (through the cover glass where the station
+/// has one) and converts to `(u, v)`.
 pub fn to_screen(screen: &Screen, from: &Point3<f64>, d: &Dir) -> Result<(f64, f64), Miss> {
+    let landing = match &screen.cover_glass {
+        None => bare_landing(screen, from, d)?,
+        Some(glass) => glass
+            .land(&screen.origin_mm, &screen.normal_towards(from), from, d)
+            .ok_or(Miss::ScreenMissed)?,
+    };
+    let (u, v) = screen.coordinates(&landing);
+    if screen.contains(u, v) {
+        Ok((u, v))
+    } else {
+        Err(Miss::OffScreen)
+    }
+}
+
+fn bare_landing(screen: &Screen, from: &Point3<f64>, d: &Dir) -> Result<Point3<f64>, Miss> {
     let n = screen.normal();
     let denom = d.dot(&n);
     if denom.abs() < 1e-12 {
@@ -91,12 +107,7 @@ pub fn to_screen(screen: &Screen, from: &Point3<f64>, d: &Dir) -> Result<(f64, f
     if s <= 0.0 {
         return Err(Miss::ScreenMissed);
     }
-    let (u, v) = screen.coordinates(&(from + s * d.as_ref()));
-    if screen.contains(u, v) {
-        Ok((u, v))
-    } else {
-        Err(Miss::OffScreen)
-    }
+    Ok(from + s * d.as_ref())
 }
 
 impl Plate {

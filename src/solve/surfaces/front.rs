@@ -135,7 +135,16 @@ pub fn front_from_slopes(
             let s = station.screen.world_point(ob.s[0][0], ob.s[0][1]);
             let to_screen = s - p;
             let dist = to_screen.norm();
-            let n = (to_screen / dist - ob.dir).normalize();
+            // The reflected ray's direction: straight at the screen point, or
+            // bent so that the cover glass takes it there.
+            let out = match station.screen.cover_glass {
+                None => to_screen / dist,
+                Some(_) => match station.screen.aim(&p, ob.s[0][0], ob.s[0][1]) {
+                    Some(d) => d.into_inner(),
+                    None => continue,
+                },
+            };
+            let n = (out - ob.dir).normalize();
             // A screen error δ (mm) turns the reflected ray by δ/dist and the
             // normal by half that.
             let sigma = 0.5 * (ob.sigma(0, 0) + ob.sigma(0, 1)) * pitch / (2.0 * dist);

@@ -69,6 +69,8 @@ impl Observations {
         coords: &[f64],
         unc: Uncertainty,
     ) -> Result<Self, SurfaceError> {
+        // Rays in the element's own frame (station v2's pose).
+        let station = &station.element_frame();
         let cam = &station.camera;
         let n = cam.pixel_count() * 4;
         let (unc_name, unc_len, unc_want, tail) = match unc {

@@ -135,17 +135,21 @@ fn refract(d: &V3<LOCAL>, n: &V3<LOCAL>, eta: f64) -> Result<V3<LOCAL>, Miss> {
 
 fn to_screen(screen: &Screen, p: &V3<LOCAL>, d: &V3<LOCAL>) -> Result<[D; 2], Miss> {
     let n = v3c(screen.normal().into_inner().into());
-    let denom = dot(d, &n);
-    if denom.v.abs() < 1e-12 {
-        return Err(Miss::ScreenMissed);
-    }
     let o: V3<LOCAL> = v3c(screen.origin_mm.coords.into());
-    let op = [o[0] - p[0], o[1] - p[1], o[2] - p[2]];
-    let s = dot(&op, &n) / denom;
-    if s.v <= 0.0 {
-        return Err(Miss::ScreenMissed);
-    }
-    let x = axpy(p, s, d);
+    let (p, d) = match &screen.cover_glass {
+        None => (*p, *d),
+        Some(glass) => {
+            // Into the glass at its outer face, a plane `thickness` above the
+            // pixels on the viewer's side; the landing below is on the pixels.
+            let nv = screen.normal_towards(&Point3::from(v3val(p)));
+            let nv: V3<LOCAL> = v3c(nv.into_inner().into());
+            let face = axpy(&o, D::c(glass.thickness_mm), &nv);
+            let entry = to_plane(&face, &nv, p, d)?;
+            let inside = refract(d, &nv, 1.0 / glass.refractive_index)?;
+            (entry, inside)
+        }
+    };
+    let x = to_plane(&o, &n, &p, &d)?;
     let rel = [x[0] - o[0], x[1] - o[1], x[2] - o[2]];
     let k = 1.0 / screen.pixel_pitch_mm;
     let u = dot(&rel, &v3c(screen.u_axis.into_inner().into())).scale(k);
@@ -154,6 +158,20 @@ fn to_screen(screen: &Screen, p: &V3<LOCAL>, d: &V3<LOCAL>) -> Result<[D; 2], Mi
         return Err(Miss::OffScreen);
     }
     Ok([u, v])
+}
+
+/// Where the ray from `p` along `d` meets the plane through `o` with normal `n`.
+fn to_plane(o: &V3<LOCAL>, n: &V3<LOCAL>, p: &V3<LOCAL>, d: &V3<LOCAL>) -> Result<V3<LOCAL>, Miss> {
+    let denom = dot(d, n);
+    if denom.v.abs() < 1e-12 {
+        return Err(Miss::ScreenMissed);
+    }
+    let op = [o[0] - p[0], o[1] - p[1], o[2] - p[2]];
+    let s = dot(&op, n) / denom;
+    if s.v <= 0.0 {
+        return Err(Miss::ScreenMissed);
+    }
+    Ok(axpy(p, s, d))
 }
 
 /// The front reflection of the camera ray from `camera` along `d` (S1).

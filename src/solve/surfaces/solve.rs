@@ -112,6 +112,9 @@ pub fn reconstruct(
     station: &Station,
     opts: &SurfaceOptions,
 ) -> Result<SurfaceSolution, SurfaceError> {
+    // Everything is fitted in the element's own frame (station v2's pose);
+    // `obs` were built in it by `Observations::from_maps`.
+    let station = &station.element_frame();
     let smoothed;
     let obs = if opts.covariance_smoothing_px > 0 && obs.sigma_known {
         smoothed = obs.smoothed_covariance(opts.covariance_smoothing_px);
