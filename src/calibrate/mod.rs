@@ -14,16 +14,19 @@
 //!   the flat points) and the element's pose, with covariances.
 //! - [`centroid`]: the target spot's sub-pixel centroid in a camera frame,
 //!   with its covariance.
+//! - [`make`]: the template, the target positions to visit, capturing a
+//!   target frame into the session.
 //! - [`check`]: everything missing or wrong in a session in progress, in
 //!   the operator's words.
 
 pub mod centroid;
 pub mod check;
 pub mod frame;
+pub mod make;
 mod rules;
 pub mod session;
 pub mod session_file;
 pub mod spread;
 
 pub use rules::{station_size_mm, PLAUSIBLE_STAGE_STD_UM, UNIT_MARGIN};
-pub use session::{Session, SessionError, Target, TargetObservation};
+pub use session::{ObservedTarget, Session, SessionError, Target, TargetObservation};

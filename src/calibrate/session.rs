@@ -10,8 +10,9 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Point2, Point3};
+use nalgebra::{Matrix2, Point2, Point3};
 
+use super::centroid::{centroid_of_file, CentroidError};
 use super::rules;
 use super::session_file::{SessionElement, SessionFile};
 use crate::optics::station::{Station, StationError};
@@ -188,6 +189,20 @@ impl Target {
     }
 }
 
+/// A target with its centroid ([`Session::centroids`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObservedTarget {
+    /// `target_point[index]`.
+    pub index: usize,
+    /// The PSM's focus, stage frame, mm.
+    pub stage_mm: Point3<f64>,
+    /// The centroid, pixel-centre convention, px.
+    pub position_px: Point2<f64>,
+    /// Its covariance from the frame's noise, px²; `None` for a centroid
+    /// given as `image_px`.
+    pub covariance_px2: Option<Matrix2<f64>>,
+}
+
 /// One `[[screen_point]]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScreenMark {
@@ -292,6 +307,35 @@ impl Session {
             path,
             file,
         }
+    }
+
+    /// Every target's centroid, px (pixel-centre convention), in file
+    /// order: found in its frame (with its covariance, px²) or as given
+    /// (`image_px`, whose σ the session does not state: `None`).
+    ///
+    /// # Errors
+    /// The first frame without a usable spot, naming its entry and file
+    /// (wrong size for the nominal camera, no spot, two spots, on the edge).
+    pub fn centroids(&self) -> Result<Vec<ObservedTarget>, CentroidError> {
+        let size = (self.nominal.camera.width, self.nominal.camera.height);
+        self.targets
+            .iter()
+            .map(|t| {
+                let (position_px, covariance_px2) = match &t.observation {
+                    TargetObservation::Centroid(px) => (*px, None),
+                    TargetObservation::Image(file) => {
+                        let c = centroid_of_file(file, &t.entry(), Some(size))?;
+                        (c.position_px, Some(c.covariance_px2))
+                    }
+                };
+                Ok(ObservedTarget {
+                    index: t.index,
+                    stage_mm: t.stage_mm,
+                    position_px,
+                    covariance_px2,
+                })
+            })
+            .collect()
     }
 
     /// The folder of `session.toml`, against which its paths resolve.
