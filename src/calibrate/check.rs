@@ -5,16 +5,18 @@
 //! where the nominal station puts it.
 //!
 //! The nominal station is rough, so its predictions are off by a smooth
-//! pattern (a shift, a scale, a turn). A target is flagged when its spot
-//! is off that pattern — an affine map from predicted to found positions,
-//! fitted robustly — by more than 5 robust σ of the others' residuals (and
-//! of its own centroid's σ): a wrong reading, not a rough station.
+//! pattern. A target is flagged when its spot is off the central
+//! projection the other targets follow — a DLT from the targets' world
+//! positions to their spots, fitted robustly — by more than 5 robust σ of
+//! the others' residuals (and of its own σ: centroid and stage noise): a
+//! wrong reading, not a rough station.
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{DMatrix, DVector, Point2};
+use nalgebra::{Point2, Point3};
 
 use super::centroid::{centroid_of_file, Centroid};
+use super::dlt;
 use super::frame::{ElementPose, PoseSource, WorldFrame};
 use super::rules;
 use super::session::{read_file, session_toml, Session};
@@ -256,12 +258,19 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
                 format!("target {} lies behind the nominal camera: wrong reading or wrong nominal station?", t.index),
             );
         }
-        let sigma = found
-            .as_ref()
-            .and_then(|(_, c)| c.as_ref())
-            .map_or(0.0, |c| c.std_px()[0].max(c.std_px()[1]));
-        if let (Some((f, _)), Some(p)) = (&found, predicted) {
-            pairs.push((report.targets.len(), p, *f, sigma));
+        let world_mm = frame.to_world(&t.stage_mm);
+        if let (Some((f, c)), Some(p)) = (&found, predicted) {
+            // The spot's σ: its centroid's, and the stage noise seen from
+            // the camera (focal length in px over the distance).
+            let centroid = c.as_ref().map_or(0.0, |c| c.std_px()[0].max(c.std_px()[1]));
+            let stage = session.stage_std_mm * cam.focal_px() / (world_mm - cam.position_mm).norm();
+            pairs.push(Pair {
+                slot: report.targets.len(),
+                world_mm,
+                predicted_px: p,
+                found_px: *f,
+                sigma_px: centroid.hypot(stage),
+            });
         }
         report.targets.push(TargetCheck {
             index: t.index,
@@ -274,21 +283,39 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
     coverage(report, size);
 }
 
-/// Fits found ≈ A predicted + b robustly and flags the targets far off it.
-fn flag_off_pattern(pairs: &[(usize, Point2<f64>, Point2<f64>, f64)], report: &mut CheckReport) {
-    // An affine map has 6 parameters: 7 or more points leave a residual to judge.
+/// A target for the pattern test: its slot in the report, world position,
+/// nominal prediction, centroid and that centroid's σ (px).
+struct Pair {
+    slot: usize,
+    world_mm: Point3<f64>,
+    predicted_px: Point2<f64>,
+    found_px: Point2<f64>,
+    sigma_px: f64,
+}
+
+/// Fits a projection matrix (DLT) from the targets' world positions to
+/// their spots, robustly, and flags the targets far off it: a central
+/// projection explains every right reading up to distortion and noise.
+fn flag_off_pattern(pairs: &[Pair], report: &mut CheckReport) {
+    // 11 parameters: 7 or more targets leave residuals to judge.
     if pairs.len() < 7 {
         return;
     }
     let mut keep = vec![true; pairs.len()];
     let mut residuals = vec![0.0; pairs.len()];
     let mut scale = 0.0;
+    let limit = |scale: f64, p: &Pair| 5.0 * scale.max(p.sigma_px);
     for _ in 0..3 {
-        let Some(map) = fit_affine(pairs, &keep) else {
-            return;
-        };
-        for (k, (_, p, f, _)) in pairs.iter().enumerate() {
-            residuals[k] = (apply(&map, p) - f).norm();
+        let (w, f): (Vec<_>, Vec<_>) = pairs
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| (p.world_mm, p.found_px))
+            .unzip();
+        let Some(m) = dlt::dlt(&w, &f) else { return };
+        for (k, p) in pairs.iter().enumerate() {
+            residuals[k] =
+                dlt::project(&m, &p.world_mm).map_or(f64::INFINITY, |q| (q - p.found_px).norm());
         }
         let mut kept: Vec<f64> = residuals
             .iter()
@@ -297,59 +324,30 @@ fn flag_off_pattern(pairs: &[(usize, Point2<f64>, Point2<f64>, f64)], report: &m
             .map(|(r, _)| *r)
             .collect();
         kept.sort_by(f64::total_cmp);
-        // The median of 2-D residual lengths is 1.1774 σ for a Gaussian.
+        // The median length of a 2-D Gaussian residual is 1.1774 σ.
         scale = kept[kept.len() / 2] / 1.1774;
-        for (k, (.., sigma)) in pairs.iter().enumerate() {
-            keep[k] = residuals[k] <= 5.0 * scale.max(*sigma);
+        for (k, p) in pairs.iter().enumerate() {
+            keep[k] = residuals[k] <= limit(scale, p);
         }
     }
-    for (k, (slot, p, f, sigma)) in pairs.iter().enumerate() {
-        report.targets[*slot].off_pattern_px = Some(residuals[k]);
-        if residuals[k] > 5.0 * scale.max(*sigma) {
-            let index = report.targets[*slot].index;
+    for (k, p) in pairs.iter().enumerate() {
+        report.targets[p.slot].off_pattern_px = Some(residuals[k]);
+        if residuals[k] > limit(scale, p) {
+            let index = report.targets[p.slot].index;
             report.push(
                 Severity::Warning,
                 Some(format!("target_point[{index}]")),
                 format!(
-                    "target {index}'s spot is {:.0} px from where the nominal station puts it \
-                     ({:.1} px off the pattern the other targets follow, which agree to {:.1} px): wrong reading?",
-                    (p - f).norm(),
+                    "target {index}'s spot is {:.0} px from where the nominal station puts it, \
+                     {:.1} px off the projection the other targets follow (they agree to \
+                     {:.2} px): wrong reading?",
+                    (p.predicted_px - p.found_px).norm(),
                     residuals[k],
-                    scale
+                    scale.max(p.sigma_px)
                 ),
             );
         }
     }
-}
-
-type Affine = [f64; 6];
-
-fn apply(m: &Affine, p: &Point2<f64>) -> Point2<f64> {
-    Point2::new(
-        m[0] * p.x + m[1] * p.y + m[2],
-        m[3] * p.x + m[4] * p.y + m[5],
-    )
-}
-
-fn fit_affine(pairs: &[(usize, Point2<f64>, Point2<f64>, f64)], keep: &[bool]) -> Option<Affine> {
-    let used: Vec<_> = pairs
-        .iter()
-        .zip(keep)
-        .filter(|(_, k)| **k)
-        .map(|(p, _)| p)
-        .collect();
-    if used.len() < 3 {
-        return None;
-    }
-    let a = DMatrix::from_fn(used.len(), 3, |r, c| [used[r].1.x, used[r].1.y, 1.0][c]);
-    let svd = a.svd(true, true);
-    let mut m = [0.0; 6];
-    for axis in 0..2 {
-        let b = DVector::from_fn(used.len(), |r, _| used[r].2[axis]);
-        let x = svd.solve(&b, 1e-12).ok()?;
-        m[3 * axis..3 * axis + 3].copy_from_slice(x.as_slice());
-    }
-    Some(m)
 }
 
 /// Warns when the found spots cover less than half the sensor along an axis.

@@ -16,11 +16,14 @@
 //!   with its covariance.
 //! - [`make`]: the template, the target positions to visit, capturing a
 //!   target frame into the session.
+//! - [`dlt`]: the direct linear transform (a projection matrix from
+//!   world points and their pixels).
 //! - [`check`]: everything missing or wrong in a session in progress, in
 //!   the operator's words.
 
 pub mod centroid;
 pub mod check;
+pub mod dlt;
 pub mod frame;
 pub mod make;
 mod rules;
