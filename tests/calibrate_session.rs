@@ -378,32 +378,46 @@ fn a_target_frame_of_the_wrong_size_is_named() {
     );
 }
 
+/// A template session (nominal copied in), checked as written.
+fn template(dir: &Path, station: &Station) -> (PathBuf, PathBuf) {
+    let session = dir.join("s");
+    let path = make::write_template(&session, Some((&nominal_path(), station))).unwrap();
+    (session, path)
+}
+
+fn error_entries(session: &Path) -> Vec<String> {
+    check(session)
+        .findings
+        .iter()
+        .filter(|x| x.severity == Severity::Error)
+        .filter_map(|x| x.entry.clone())
+        .collect()
+}
+
 #[test]
-fn the_template_round_trips_through_the_check_and_captures_append() {
+fn the_template_round_trips_through_the_check() {
     let dir = tempfile::tempdir().unwrap();
-    let session = dir.path().join("s");
     let station = Station::load(&nominal_path()).unwrap();
-    let path = make::write_template(&session, Some((&nominal_path(), &station))).unwrap();
+    let (session, _) = template(dir.path(), &station);
     assert!(session.join("targets").is_dir() && session.join("nominal.toml").is_file());
     assert!(matches!(
         make::write_template(&session, None),
         Err(make::MakeError::Exists { .. })
     ));
     // The template parses; the check says what is missing, in entries.
-    let report = check(&session);
-    let missing: Vec<_> = report
-        .findings
-        .iter()
-        .filter(|x| x.severity == Severity::Error)
-        .filter_map(|x| x.entry.clone())
-        .collect();
     assert_eq!(
-        missing,
-        ["reference_flat.acquisition", "flat_point", "target_point"],
-        "{:#?}",
-        report.findings
+        error_entries(&session),
+        ["reference_flat.acquisition", "flat_point", "target_point"]
     );
+    let loaded = mfd::calibrate::session::read_file(&session.join("session.toml")).unwrap();
+    assert_eq!(loaded.element.thickness_mm, station.element.thickness_mm);
+}
 
+#[test]
+fn captures_append_to_the_template_and_the_check_flags_a_wrong_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let station = Station::load(&nominal_path()).unwrap();
+    let (session, path) = template(dir.path(), &station);
     // Fill it: flat and element points as text, targets captured from the
     // simulated target camera where the nominal station images them.
     let good = good_file(&station);

@@ -29,6 +29,7 @@ pub mod make;
 mod rules;
 pub mod session;
 pub mod session_file;
+mod spot_background;
 pub mod spread;
 
 pub use rules::{station_size_mm, PLAUSIBLE_STAGE_STD_UM, UNIT_MARGIN};

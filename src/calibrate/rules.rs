@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Point3;
 
 use super::session::{folder_of, SessionError};
-use super::session_file::{SessionFile, SESSION_FORMAT};
+use super::session_file::{SessionElement, SessionFile, SESSION_FORMAT};
 use super::spread::Spread;
 use crate::optics::station::Station;
 
@@ -97,7 +97,19 @@ impl Rules<'_> {
                 "the value is in µm (1.0 means 1 µm): check its unit".into(),
             );
         }
-        let e = &file.element;
+        self.element(&file.element);
+        let pv = file.reference_flat.flat_pv_nm;
+        if !(pv.is_finite() && pv >= 0.0) {
+            self.invalid(
+                "reference_flat.flat_pv_nm",
+                format!("{pv}"),
+                "a finite flatness ≥ 0 nm PV".into(),
+                "give the flat's certified flatness".into(),
+            );
+        }
+    }
+
+    fn element(&mut self, e: &SessionElement) {
         if !e.center_stage_mm.iter().all(|c| c.is_finite()) {
             self.invalid(
                 "element.center_stage_mm",
@@ -144,15 +156,6 @@ impl Rules<'_> {
                 format!("{}", e.refractive_index_std),
                 format!("well below n − 1 = {:.4}", n - 1.0),
                 "give the refractometer's 1 σ".into(),
-            );
-        }
-        let pv = file.reference_flat.flat_pv_nm;
-        if !(pv.is_finite() && pv >= 0.0) {
-            self.invalid(
-                "reference_flat.flat_pv_nm",
-                format!("{pv}"),
-                "a finite flatness ≥ 0 nm PV".into(),
-                "give the flat's certified flatness".into(),
             );
         }
     }
@@ -263,7 +266,7 @@ impl Rules<'_> {
                 self.problems.push(SessionError::Nominal {
                     path: self.path.to_path_buf(),
                     station,
-                    source,
+                    source: Box::new(source),
                 });
                 None
             }

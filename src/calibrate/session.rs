@@ -48,7 +48,7 @@ pub enum SessionError {
         station: PathBuf,
         /// Why it was refused.
         #[source]
-        source: StationError,
+        source: Box<StationError>,
     },
     /// Fewer entries of a kind than the spec asks for.
     #[error("{path}: `{entry}`: {count} given, {needed}: {todo}")]
