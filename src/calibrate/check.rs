@@ -19,7 +19,7 @@ use super::centroid::{centroid_of_file, Centroid};
 use super::dlt;
 use super::frame::{ElementPose, PoseSource, WorldFrame};
 use super::rules;
-use super::session::{read_file, session_toml, Session};
+use super::session::{read_file, session_toml, Session, SessionError};
 use super::spread::chi2_quantile_999;
 use crate::acquire::acquisition::Acquisition;
 
@@ -107,8 +107,18 @@ pub fn check(path: &Path) -> CheckReport {
             return report;
         }
     };
-    let (_, problems) = rules::validate(&file, &path);
-    let solvable = problems.is_empty();
+    let (nominal, problems) = rules::validate(&file, &path);
+    // What can be judged with the rest unfinished: with the nominal
+    // station and readings that are all numbers, the frame, the pose and
+    // the targets are checked too.
+    let judgeable = problems.iter().all(|p| {
+        matches!(
+            p,
+            SessionError::MissingFile { .. }
+                | SessionError::TooFew { .. }
+                | SessionError::Coplanar { .. }
+        )
+    });
     for p in &problems {
         report.push(
             Severity::Error,
@@ -123,11 +133,9 @@ pub fn check(path: &Path) -> CheckReport {
             "no element points: the element is taken to stand on the reference plane".into(),
         );
     }
-    if solvable {
-        // Every rule holds, so the session loads.
-        if let Ok(session) = Session::load(&path) {
-            check_loaded(&session, &mut report);
-        }
+    if let (Some(nominal), true) = (nominal, judgeable) {
+        let session = Session::build(path.clone(), file, nominal);
+        check_loaded(&session, &mut report);
     }
     report.findings.sort_by_key(|f| f.severity);
     report
@@ -152,7 +160,10 @@ fn check_loaded(session: &Session, report: &mut CheckReport) {
     let frame = match WorldFrame::of_session(session) {
         Ok(f) => f,
         Err(e) => {
-            report.push(Severity::Error, Some("flat_point".into()), e.to_string());
+            // Too few flat points are already reported by the rules.
+            if session.flat_points_mm.len() >= 3 {
+                report.push(Severity::Error, Some("flat_point".into()), e.to_string());
+            }
             return;
         }
     };
@@ -160,7 +171,13 @@ fn check_loaded(session: &Session, report: &mut CheckReport) {
     if let Ok(pose) = ElementPose::of_session(session) {
         pose_findings(&pose, report);
     }
-    if let Err(e) = Acquisition::open(&session.reference_flat) {
+    // A missing acquisition is already reported by the rules.
+    let flat = &session.reference_flat;
+    if let Some(e) = flat
+        .is_file()
+        .then(|| Acquisition::open(flat).err())
+        .flatten()
+    {
         report.push(
             Severity::Error,
             Some("reference_flat.acquisition".into()),
@@ -228,11 +245,15 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
         let entry = t.entry();
         let found: Option<(Point2<f64>, Option<Centroid>)> = match &t.observation {
             super::TargetObservation::Centroid(px) => Some((*px, None)),
+            // A missing frame is already reported by the rules.
+            super::TargetObservation::Image(file) if !file.is_file() => None,
             super::TargetObservation::Image(file) => {
                 match centroid_of_file(file, &entry, Some(size)) {
                     Ok(c) => Some((c.position_px, Some(c))),
                     Err(e) => {
-                        report.push(Severity::Error, Some(entry.clone()), e.to_string());
+                        let text = e.to_string();
+                        let text = text.strip_prefix(&format!("`{entry}`: ")).unwrap_or(&text);
+                        report.push(Severity::Error, Some(entry.clone()), text.to_string());
                         None
                     }
                 }
@@ -251,6 +272,19 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
             }
         }
         let predicted = cam.project(&frame.to_world(&t.stage_mm));
+        let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+        if let Some(p) = predicted.filter(|p| !(0.0..w).contains(&p.x) || !(0.0..h).contains(&p.y))
+        {
+            report.push(
+                Severity::Warning,
+                Some(entry.clone()),
+                format!(
+                    "the nominal station puts target {} at ({:.0}, {:.0}) px, off its {}x{} sensor: \
+                     wrong reading, or move it into the view",
+                    t.index, p.x, p.y, cam.width, cam.height
+                ),
+            );
+        }
         if predicted.is_none() {
             report.push(
                 Severity::Warning,

@@ -165,8 +165,8 @@ pub struct PlannedTarget {
 /// Target positions landing on a `grid` (columns, rows) over the sensor,
 /// inset by a tenth of it from the edges (a spot's centroid window needs
 /// room), at each of `heights_mm` above the reference plane (world z),
-/// every other height shifted by half a grid step so the heights fill each
-/// other's gaps. With `frame` the positions are stage readings.
+/// every other height on the grid's gaps instead, so the heights fill each
+/// other's. With `frame` the positions are stage readings.
 ///
 /// # Errors
 /// [`MakeError::Heights`] unless the heights hold two distinct values.
@@ -187,11 +187,18 @@ pub fn plan_targets(
     let (nx, ny) = (grid.0.max(2), grid.1.max(2));
     let mut out = Vec::new();
     for (level, &z) in heights_mm.iter().enumerate() {
-        let shift = if level % 2 == 1 { 0.5 } else { 0.0 };
+        // Even levels span the inset sensor edge to edge, odd ones sit in
+        // their gaps.
+        let at = |k: u32, n: u32| {
+            if level % 2 == 0 {
+                f64::from(k) / f64::from(n - 1)
+            } else {
+                (f64::from(k) + 0.5) / f64::from(n)
+            }
+        };
         for row in 0..ny {
             for col in 0..nx {
-                let fx = ((f64::from(col) + shift) / f64::from(nx - 1)).min(1.0);
-                let fy = ((f64::from(row) + shift) / f64::from(ny - 1)).min(1.0);
+                let (fx, fy) = (at(col, nx), at(row, ny));
                 let px = Point2::new(w * (0.1 + 0.8 * fx), h * (0.1 + 0.8 * fy));
                 let d = cam.ray_through(px.x, px.y);
                 // The ray C + t d meets the plane z = height.
@@ -323,4 +330,40 @@ pub fn append_target(path: &Path, stage_mm: [f64; 3], image: &str) -> Result<(),
         return Err(e.into());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planned_targets_land_where_planned_at_each_height() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("calib/paper-sim.toml");
+        let station = Station::load(&path).unwrap();
+        let planned = plan_targets(&station, None, &[0.0, 25.0, 50.0], (4, 3)).unwrap();
+        assert_eq!(planned.len(), 3 * 12);
+        let (w, h) = (
+            f64::from(station.camera.width),
+            f64::from(station.camera.height),
+        );
+        for (k, t) in planned.iter().enumerate() {
+            assert!((t.world_mm.z - [0.0, 25.0, 50.0][k / 12]).abs() < 1e-9);
+            let p = station.camera.project(&t.world_mm).unwrap();
+            // Inset by a tenth of the sensor: the centroid window has room.
+            assert!((0.1 * w - 1e-6..=0.9 * w + 1e-6).contains(&p.x), "{p}");
+            assert!((0.1 * h - 1e-6..=0.9 * h + 1e-6).contains(&p.y), "{p}");
+        }
+        // No two targets of one height share a pixel.
+        for level in planned.chunks(12) {
+            for (a, ta) in level.iter().enumerate() {
+                for tb in &level[a + 1..] {
+                    assert!((ta.expected_px - tb.expected_px).norm() > 1.0);
+                }
+            }
+        }
+        assert!(matches!(
+            plan_targets(&station, None, &[5.0, 5.0], (3, 3)),
+            Err(MakeError::Heights { .. })
+        ));
+    }
 }

@@ -268,7 +268,9 @@ impl Session {
         }
     }
 
-    fn build(path: PathBuf, file: SessionFile, nominal: Station) -> Session {
+    /// The session as the file says, without checking its rules (the
+    /// check judges an unfinished one with it).
+    pub(super) fn build(path: PathBuf, file: SessionFile, nominal: Station) -> Session {
         let dir = folder_of(&path);
         let pt = |p: [f64; 3]| Point3::from(p);
         let targets = file

@@ -79,7 +79,6 @@ struct CaptureArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        num_args = 3,
         allow_hyphen_values = true,
         required = true
     )]
@@ -229,7 +228,7 @@ fn run_check(args: &CheckArgs) -> anyhow::Result<()> {
         report.count(Severity::Warning),
     );
     println!(
-        "{}: {e} errors, {w} warnings{}",
+        "{}: {e} error(s), {w} warning(s){}",
         report.path.display(),
         if report.ready() {
             "; ready to solve"
