@@ -475,6 +475,10 @@ fn captures_append_to_the_template_and_the_check_flags_a_wrong_reading() {
     assert!(text.contains("# Step 4: a point target"), "comments kept");
     let report = check(&session);
     assert!(report.ready(), "{:#?}", report.findings);
+    let loaded = Session::load(&session).unwrap();
+    let found = loaded.centroids().unwrap();
+    assert_eq!(found.len(), planned.len());
+    assert!(found.iter().all(|t| t.covariance_px2.is_some()));
 
     // A reading entered wrongly (x off by 5 mm) is flagged as such.
     let mut file: SessionFile = toml::from_str(&text).unwrap();

@@ -361,6 +361,20 @@ mod tests {
                 }
             }
         }
+        // With the lens's distortion (k1 = −0.12, the case) the
+        // targets still land on the planned pixels: ray and projection are
+        // each other's inverse.
+        let mut distorted = station.clone();
+        distorted.camera.distortion = Some(crate::optics::station::Distortion {
+            k: [-0.12, 0.0, 0.0],
+            p: [0.0, 0.0],
+        });
+        let plain = plan_targets(&station, None, &[0.0, 10.0], (3, 3)).unwrap();
+        let bent = plan_targets(&distorted, None, &[0.0, 10.0], (3, 3)).unwrap();
+        for (a, b) in plain.iter().zip(&bent) {
+            assert!((a.expected_px - b.expected_px).norm() < 1e-6);
+        }
+        assert!((plain[0].world_mm - bent[0].world_mm).norm() > 0.1);
         assert!(matches!(
             plan_targets(&station, None, &[5.0, 5.0], (3, 3)),
             Err(MakeError::Heights { .. })
