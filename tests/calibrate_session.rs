@@ -409,6 +409,10 @@ fn the_template_round_trips_through_the_check() {
         error_entries(&session),
         ["reference_flat.acquisition", "flat_point", "target_point"]
     );
+    let report = check(&session);
+    assert!(report.findings.iter().any(|f| f.severity == Severity::Note
+        && f.message
+            .contains("the element is taken to stand on the reference plane")));
     let loaded = mfd::calibrate::session::read_file(&session.join("session.toml")).unwrap();
     assert_eq!(loaded.element.thickness_mm, station.element.thickness_mm);
 }
