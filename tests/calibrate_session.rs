@@ -588,6 +588,29 @@ fn the_cli_writes_a_template_and_checks_it() {
         out.status.success() && stdout.matches("[[target_point]]").count() == 18,
         "{stdout}"
     );
+    // A capture from the simulated target camera (no flat points yet: the
+    // spot at the sensor's centre) writes the frame and appends the entry.
+    let cap = mfd(&[
+        "calibrate",
+        "capture",
+        session.to_str().unwrap(),
+        "--stage-mm",
+        "-1.5,2,3",
+        "--camera",
+        "sim",
+    ]);
+    let said = String::from_utf8_lossy(&cap.stdout);
+    assert!(
+        cap.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cap.stderr)
+    );
+    assert!(
+        said.contains("target_point[0]: wrote targets/000.png") && said.contains("spot at (648"),
+        "{said}"
+    );
+    let file = mfd::calibrate::session::read_file(&session.join("session.toml")).unwrap();
+    assert_eq!(file.target_point[0].stage_mm, [-1.5, 2.0, 3.0]);
     // What it prints is TOML a session takes as is.
     let parsed: toml::Value = toml::from_str(&stdout).unwrap();
     assert_eq!(parsed["target_point"].as_array().unwrap().len(), 18);
