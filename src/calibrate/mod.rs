@@ -6,5 +6,31 @@
 //!
 //! It sits above the solvers: the reference flat's screen points come from
 //! the spectral stage.
+//!
+//! - [`session_file`]: the serde types of `session.toml`, field for field.
+//! - [`session`]: [`Session::load`], a validated session (paths resolved,
+//!   the nominal station loaded), and [`SessionError`].
+//! - [`frame`]: the world frame the session defines (reference plane from
+//!   the flat points) and the element's pose, with covariances.
+//! - [`centroid`]: the target spot's sub-pixel centroid in a camera frame,
+//!   with its covariance.
+//! - [`make`]: the template, the target positions to visit, capturing a
+//!   target frame into the session.
+//! - [`dlt`]: the direct linear transform (a projection matrix from
+//!   world points and their pixels).
+//! - [`check`]: everything missing or wrong in a session in progress, in
+//!   the operator's words.
 
+pub mod centroid;
+pub mod check;
+pub mod dlt;
+pub mod frame;
+pub mod make;
+mod rules;
+pub mod session;
 pub mod session_file;
+mod spot_background;
+pub mod spread;
+
+pub use rules::{station_size_mm, PLAUSIBLE_STAGE_STD_UM, UNIT_MARGIN};
+pub use session::{ObservedTarget, Session, SessionError, Target, TargetObservation};
