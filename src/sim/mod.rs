@@ -4,7 +4,8 @@
 //! with injected [`SimFaults`]), what the simulated screen shows
 //! ([`ScreenState`], [`SimDisplay`], [`MirroredDisplay`]), the frame feed of
 //! the fake GigE Vision camera ([`GigeFeed`]), seeded random scenes
-//! ([`RandomSurfaceSpec`]), and [`simulate`], which writes a whole
+//! ([`RandomSurfaceSpec`]), a phase-shifting acquisition of a mirror on a
+//! display with a gamma ([`PhaseShiftRenderer`]), and [`simulate`], which writes a whole
 //! acquisition folder with its truth.
 //!
 //! Arrows point down: this module uses `acquire` (the camera trait, the
@@ -14,6 +15,7 @@
 
 mod camera;
 mod gige_feed;
+mod phase;
 mod render;
 mod scene;
 mod screen;
@@ -23,6 +25,7 @@ use std::time::Instant;
 
 pub use camera::{SimFaults, SimulatedCamera};
 pub use gige_feed::{Filled, GigeFeed};
+pub use phase::{phase_shift_patterns, PhaseShiftParams, PhaseShiftRenderer};
 pub use render::{Renderer, SimParams};
 pub use scene::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
