@@ -233,29 +233,50 @@ fn issue_patterns() -> Vec<Pattern> {
 
 #[test]
 fn a_32_frame_acquisition_of_a_mirror_decodes_at_the_bound() {
+    // γ = 2 (the issue's display) and 2.2 (the display profile in hw/).
+    for gamma in [2.0, 2.2] {
+        let params = PhaseShiftParams {
+            gamma,
+            ..PhaseShiftParams::default()
+        };
+        let o = run(params, &issue_patterns(), Some(gamma));
+        report(&format!("γ {gamma}, modelled"), &o);
+        // The issue's criteria: ≥ 99 % decoded, within 1.5× the bound.
+        assert!(o.decoded as f64 >= 0.99 * o.expected as f64);
+        assert!(o.rms_error <= 1.5 * o.rms_bound);
+        // err/σ: z² has mean 1 and variance 2 per coordinate; with the two
+        // coordinates of a pixel counted as one independent value, RMS(z)
+        // scatters by 1/sqrt(2N): 4 of those.
+        let tol = 4.0 / (2.0 * o.decoded as f64).sqrt();
+        assert!(
+            (o.rms_z - 1.0).abs() <= tol,
+            "RMS(err/σ) {} ± {tol}",
+            o.rms_z
+        );
+        // No ripple: each statistic is exponential with mean 1 without one;
+        // P(> 14) = 8e-7, over 8 of them 7e-6.
+        for r in &o.ripple {
+            assert!(r.iter().all(|&x| x < 14.0), "{:?}", o.ripple);
+        }
+    }
+}
+
+/// Without the response model, on the same noisy data: still decoded, but
+/// the noise law then reads the unmodelled harmonics as noise (the
+/// reported σ is several times the actual error, printed for the report).
+#[test]
+fn without_the_response_model_the_noisy_decode_is_pessimistic() {
     let params = PhaseShiftParams {
         gamma: 2.2,
         ..PhaseShiftParams::default()
     };
-    let o = run(params, &issue_patterns(), Some(2.2));
-    report("γ 2.2, modelled", &o);
-    // The issue's criteria: ≥ 99 % decoded, within 1.5× the bound.
+    let o = run(params, &issue_patterns(), None);
+    report("γ 2.2, not modelled", &o);
     assert!(o.decoded as f64 >= 0.99 * o.expected as f64);
-    assert!(o.rms_error <= 1.5 * o.rms_bound);
-    // err/σ: z² has mean 1 and variance 2 per coordinate; with the two
-    // coordinates of a pixel counted as one independent value, RMS(z)
-    // scatters by 1/sqrt(2N): 4 of those.
+    // The unmodelled harmonics are read as noise: σ too large, never too
+    // small (4 of the scatter of RMS(err/σ) below 1).
     let tol = 4.0 / (2.0 * o.decoded as f64).sqrt();
-    assert!(
-        (o.rms_z - 1.0).abs() <= tol,
-        "RMS(err/σ) {} ± {tol}",
-        o.rms_z
-    );
-    // No ripple: each statistic is exponential with mean 1 without one;
-    // P(> 14) = 8e-7, over 8 of them 7e-6.
-    for r in &o.ripple {
-        assert!(r.iter().all(|&x| x < 14.0), "{:?}", o.ripple);
-    }
+    assert!(o.rms_z < 1.0 - tol, "RMS(err/σ) {}", o.rms_z);
 }
 
 /// The amplitude (screen px along the direction) of the error's component
