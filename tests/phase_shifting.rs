@@ -373,3 +373,95 @@ fn periods_differing_by_multiples_of_three_do_not_alias_without_the_prior() {
         assert!(o.worst_z < 6.0, "worst |err|/σ {}", o.worst_z);
     }
 }
+
+/// `mfd simulate --display-gamma` writes such an acquisition (τ = 4, 7, 10,
+/// 13: a grid the schedule flags can give) and `mfd reconstruct
+/// --display-profile` decodes it through the pipeline: every mirror pixel
+/// found, within its reported σ (RMS(err/σ) within 4 of its scatter
+/// 1/sqrt(2N) of 1, as above).
+#[test]
+fn simulate_and_reconstruct_on_the_command_line() {
+    let dir = std::env::temp_dir().join(format!("mfd-phase-cli-{}", std::process::id()));
+    let (acq, out) = (dir.join("acq"), dir.join("out"));
+    let station = common::public_small().join("station.toml");
+    let profile = common::repo("hw/display/mtiph-e2m21gm.toml");
+    let gamma = mfd::optics::station::DisplayProfile::load(&profile)
+        .unwrap()
+        .gamma
+        .to_string();
+    let phases = "0,1.5707963267948966,3.141592653589793,4.71238898038469";
+    let (acq_s, out_s) = (acq.to_str().unwrap(), out.to_str().unwrap());
+    let sim = common::mfd(&[
+        "simulate",
+        "--station",
+        station.to_str().unwrap(),
+        "--out",
+        acq_s,
+        "--directions",
+        "45,-45",
+        "--tau-start",
+        "4",
+        "--tau-stop",
+        "13",
+        "--tau-step",
+        "3",
+        "--phases",
+        phases,
+        "--bit-depth",
+        "8",
+        "--noise",
+        "0.002",
+        "--full-well",
+        "20000",
+        "--ambient",
+        "0.05",
+        "--tau-max",
+        "200",
+        "--display-gamma",
+        &gamma,
+        "--overwrite",
+    ]);
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let rec = common::mfd(&[
+        "reconstruct",
+        acq_s,
+        "--out",
+        out_s,
+        "--display-profile",
+        profile.to_str().unwrap(),
+    ]);
+    assert!(
+        rec.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rec.stderr)
+    );
+    let (_, truth) =
+        mfd::formats::npy::read_f64(&acq.join("truth/truth_screen_coords.npy")).unwrap();
+    let (_, found) = mfd::formats::npy::read_f64(&out.join("screen_coords.npy")).unwrap();
+    let (_, cov) = mfd::formats::npy::read_f64(&out.join("screen_cov.npy")).unwrap();
+    let (mut expected, mut decoded, mut z2) = (0, 0, 0.0);
+    for q in 0..truth.len() / 4 {
+        if !truth[4 * q].is_finite() {
+            continue;
+        }
+        expected += 1;
+        if !found[4 * q].is_finite() {
+            continue;
+        }
+        decoded += 1;
+        for k in 0..2 {
+            let e = found[4 * q + k] - truth[4 * q + k];
+            z2 += e * e / cov[16 * q + 5 * k];
+        }
+    }
+    let rms_z = (z2 / (2 * decoded) as f64).sqrt();
+    eprintln!("CLI: decoded {decoded}/{expected}, RMS(err/σ) {rms_z:.3}");
+    assert!(decoded as f64 >= 0.99 * expected as f64);
+    let tol = 4.0 / (2.0 * decoded as f64).sqrt();
+    assert!((rms_z - 1.0).abs() <= tol, "RMS(err/σ) {rms_z} ± {tol}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

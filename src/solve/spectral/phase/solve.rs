@@ -336,7 +336,8 @@ fn second_pass(
     };
     let flags = pixel_flags(model, &fit, &cov, &first.unwrapped, sigma2);
     if flags.contains(PixelFlags::NO_SIGNAL) {
-        out.base.flags |= flags;
+        // Without a fringe, unwrapping has nothing to be ambiguous about.
+        out.base.flags |= flags - PixelFlags::UNRESOLVED;
         return out;
     }
     let mut r = PixelResult::empty();
