@@ -24,7 +24,7 @@
 //!    needs) and scored by the phase residuals of all τ; the best is kept.
 //!    The runner-up's score says whether the schedule can tell them apart
 //!    (periods with a common divisor cannot): a runner-up within
-//!    [`AMBIGUITY_CHI2`] is reported [`PixelFlags::UNRESOLVED`]. No
+//!    [`AMBIGUITY_CHI2`] is reported [`UNRESOLVED`](super::PixelFlags::UNRESOLVED). No
 //!    station prior is used.
 //! 3. A joint least-squares fit of all frames ([`model`]): the screen point
 //!    (u, v), a background per direction, an amplitude per (direction, τ)
@@ -32,16 +32,23 @@
 //!    display's response: emitted luminance `g^γ`, `g = 0.5 + 0.5 cos(..)`
 //!    the pattern, expanded in harmonics whose camera blur is, within each
 //!    (direction, τ) group, the Gaussian `exp(−κ_g (n² − 1) τ²)` relative to
-//!    the first ([`Response`]; κ_g fitted where γ ≠ 1). Without the response model the harmonics that the phase steps
-//!    alias onto the first one (harmonic 3 onto 1 for four steps, 2 onto 1
-//!    for three) bias the phase by a ripple locked to each fringe; with γ
-//!    exactly 2 and four equal steps there is no harmonic 3 and the ripple
-//!    vanishes either way.
+//!    the first ([`Response`]; κ_g fitted where γ ≠ 1, with a weak prior
+//!    `κ_g τ² ~ N(0, 3²)` that only matters where a harmonic is too weak
+//!    to show its falloff). Without the response model the harmonics that
+//!    the phase steps alias onto the first one (harmonic 3 onto 1 for four
+//!    steps, 2 onto 1 for three) bias the phase by a ripple locked to each
+//!    fringe; with γ exactly 2 and four equal steps there is no harmonic 3
+//!    and the ripple vanishes either way.
 //! 4. Noise: a first unweighted pass over every pixel gives the camera's
-//!    noise law `var = a + b·μ` (read + quantisation, shot noise) from the
-//!    pooled residuals; the second pass fits each pixel weighted by it, and
-//!    the covariance of (u, v) is `(JᵀWJ)⁻¹`: the Cramér–Rao bound of this
-//!    model at that noise. Detection uses all phases: per direction, the
+//!    noise law `var = a + b·μ` (read + quantisation, shot noise), regressed
+//!    from the squared residuals of the pixels that show a fringe on their
+//!    exact expectations `Σ_j (I − H)_ij² (a + b μ_j)` (H the fit's hat
+//!    matrix; with 20 parameters in 32 samples the leverages are ~0.6); the
+//!    second pass fits each pixel weighted by it, and the covariance of
+//!    (u, v) is `(JᵀWJ)⁻¹`: the Cramér–Rao bound of this model at that
+//!    noise (`bound::phase_shifting_cov` evaluates it at any parameters).
+//!    Unmodelled structure (a wrong γ) is read as noise: the σ then errs
+//!    large, not small. Detection uses all phases: per direction, the
 //!    amplitudes' joint significance `Σ B²/σ_B²` must reach
 //!    [`DETECTION_CHI2`].
 
