@@ -65,6 +65,22 @@ pub struct SpectralArgs {
     /// discontinuities).
     #[arg(long)]
     search_every_pixel: bool,
+    /// Display gamma (emitted luminance ∝ level^γ) modelled on
+    /// phase-shifting schedules (a few τ, each at ≥ 3 phase steps); without
+    /// it (or --display-profile) the display is taken as linearised.
+    #[arg(long, conflicts_with = "display_profile")]
+    display_gamma: Option<f64>,
+    /// The display profile (`hw/display/*.toml`) whose `gamma` is modelled,
+    /// as --display-gamma.
+    #[arg(long, value_parser = profile_gamma, value_name = "TOML")]
+    display_profile: Option<f64>,
+}
+
+/// The `gamma` of a display profile file.
+fn profile_gamma(path: &str) -> Result<f64, String> {
+    mfd::optics::station::DisplayProfile::load(Path::new(path))
+        .map(|p| p.gamma)
+        .map_err(|e| e.to_string())
 }
 
 impl SpectralArgs {
@@ -74,6 +90,7 @@ impl SpectralArgs {
             engine: self.engine,
             band_bins: self.band_bins,
             warm_starts: !self.search_every_pixel,
+            display_gamma: self.display_gamma.or(self.display_profile),
             ..mfd::solve::spectral::SpectralConfig::default()
         }
     }

@@ -10,7 +10,9 @@ use mfd::formats::surfaces_file::SurfacesFile;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use mfd::optics::zernike::ZernikeSurface;
-use mfd::sim::{simulate, RandomSurfaceSpec, SimParams, Simulation};
+use mfd::sim::{
+    simulate, simulate_mirror, PhaseShiftParams, RandomSurfaceSpec, SimParams, Simulation,
+};
 
 /// Arguments of `mfd simulate`.
 #[derive(Args)]
@@ -67,6 +69,11 @@ pub struct SimulateArgs {
     /// Replace an existing acquisition in --out.
     #[arg(long)]
     overwrite: bool,
+    /// Simulate a mirror (the front reflection alone) on a display that is
+    /// not linearised, emitted luminance ∝ level^γ, with the blur acting on
+    /// every harmonic of the displayed curve (for phase-shifting schedules).
+    #[arg(long, conflicts_with_all = ["gain", "third_reflection"])]
+    display_gamma: Option<f64>,
 }
 
 /// Runs `mfd simulate`.
@@ -111,8 +118,23 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         layout,
         overwrite: args.overwrite,
     };
-    let report = simulate(&sim, &args.out)
-        .with_context(|| format!("simulating into {}", args.out.display()))?;
+    let report = match args.display_gamma {
+        Some(gamma) => {
+            let phase = PhaseShiftParams {
+                gamma,
+                tau_max: args.tau_max,
+                falloff_per_period: Vec::new(),
+                ambient: args.ambient,
+                bit_depth: args.bit_depth,
+                read_noise_counts: args.noise * f64::from((1u32 << args.bit_depth.min(16)) - 1),
+                full_well_electrons: args.full_well,
+                seed: args.seed,
+            };
+            simulate_mirror(&sim, phase, &args.out)
+        }
+        None => simulate(&sim, &args.out),
+    }
+    .with_context(|| format!("simulating into {}", args.out.display()))?;
     println!(
         "simulated {} frames of {}x{} ({} pixels see the element: front {}, back {}, third {})",
         report.frames,

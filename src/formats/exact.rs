@@ -27,7 +27,7 @@ where
 /// Exactly `N` values, for an optional field (`#[serde(default)]` beside it).
 ///
 /// # Errors
-/// As [`array`].
+/// As [`array()`].
 pub fn option_array<'de, D, T, const N: usize>(d: D) -> Result<Option<[T; N]>, D::Error>
 where
     D: Deserializer<'de>,

@@ -5,7 +5,8 @@
 //! ([`ScreenState`], [`SimDisplay`], [`MirroredDisplay`]), the frame feed of
 //! the fake GigE Vision camera ([`GigeFeed`]), seeded random scenes
 //! ([`RandomSurfaceSpec`]), a point target for calibration sessions
-//! ([`SpotScene`], [`SpotCamera`]), and [`simulate`], which writes a whole
+//! ([`SpotScene`], [`SpotCamera`]), a phase-shifting acquisition of a mirror
+//! on a display with a gamma ([`PhaseShiftRenderer`]), and [`simulate`], which writes a whole
 //! acquisition folder with its truth.
 //!
 //! Arrows point down: this module uses `acquire` (the camera trait, the
@@ -15,6 +16,7 @@
 
 mod camera;
 mod gige_feed;
+mod phase;
 mod render;
 mod scene;
 mod screen;
@@ -25,6 +27,7 @@ use std::time::Instant;
 
 pub use camera::{SimFaults, SimulatedCamera};
 pub use gige_feed::{Filled, GigeFeed};
+pub use phase::{phase_shift_patterns, PhaseShiftParams, PhaseShiftRenderer};
 pub use render::{Renderer, SimParams};
 pub use scene::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
@@ -118,56 +121,92 @@ pub struct Simulation<'a> {
 /// [`SimError`] for bad parameters or when a file cannot be written; frames
 /// already written stay on disk.
 pub fn simulate(sim: &Simulation, out: &Path) -> Result<SimulationReport, SimError> {
-    let Simulation {
-        station,
-        plate,
-        truth,
-        patterns,
-        params,
-        layout,
-        overwrite,
-    } = sim.clone();
-    params.validate()?;
+    sim.params.validate()?;
     let t0 = Instant::now();
-    let view = TracedView::trace(station, plate);
+    let view = TracedView::trace(sim.station, sim.plate);
     let trace_s = t0.elapsed().as_secs_f64();
-    let mut camera = Renderer::new(&view, &station.screen, params)?;
-    let frames: Vec<FrameInfo> = FrameInfo::from_patterns(patterns);
-    let (w, h) = camera.resolution();
+    let mut camera = Renderer::new(&view, &sim.station.screen, sim.params.clone())?;
+    let bit_depth = camera.params().bit_depth as u8;
+    let render_s = write_frames(sim, out, &view, bit_depth, &mut |p, k, f| {
+        camera.render(p, k, f)
+    })?;
+    Ok(SimulationReport {
+        frames: sim.patterns.len(),
+        lit_pixels: camera.lit_pixels(),
+        paths: [view.count(0), view.count(1), view.count(2)],
+        gain: camera.gain(),
+        trace_s,
+        render_s_per_frame: render_s / sim.patterns.len().max(1) as f64,
+    })
+}
+
+/// [`simulate`] for a mirror (the element's front reflection alone) on a
+/// display that is not linearised, rendered by [`PhaseShiftRenderer`] with
+/// `phase` (its camera settings replace `sim.params`).
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_mirror(
+    sim: &Simulation,
+    phase: PhaseShiftParams,
+    out: &Path,
+) -> Result<SimulationReport, SimError> {
+    let t0 = Instant::now();
+    let view = TracedView::trace(sim.station, sim.plate);
+    let trace_s = t0.elapsed().as_secs_f64();
+    let bit_depth = phase.bit_depth as u8;
+    let camera = PhaseShiftRenderer::new(&view, &sim.station.screen, phase)?;
+    let render_s = write_frames(sim, out, &view, bit_depth, &mut |p, k, f| {
+        camera.render(p, k, f)
+    })?;
+    Ok(SimulationReport {
+        frames: sim.patterns.len(),
+        lit_pixels: view.count(0),
+        paths: [view.count(0), 0, 0],
+        gain: camera.gain(),
+        trace_s,
+        render_s_per_frame: render_s / sim.patterns.len().max(1) as f64,
+    })
+}
+
+/// Writes the acquisition folder (station copy, truth, every frame that
+/// `render(pattern, index, frame)` makes); returns the seconds spent rendering.
+fn write_frames(
+    sim: &Simulation,
+    out: &Path,
+    view: &TracedView,
+    bit_depth: u8,
+    render: &mut dyn FnMut(&Pattern, u64, &mut [u16]),
+) -> Result<f64, SimError> {
+    let (w, h) = (view.width, view.height);
+    let frames: Vec<FrameInfo> = FrameInfo::from_patterns(sim.patterns);
     let mut writer = AcquisitionWriter::create(
         out,
         "station.toml",
-        layout,
+        sim.layout,
         &frames,
         w as u32,
         h as u32,
-        overwrite,
+        sim.overwrite,
     )?;
-    station.save(&out.join("station.toml"))?;
-    write_truth(out, &view, truth)?;
+    sim.station.save(&out.join("station.toml"))?;
+    write_truth(out, view, sim.truth)?;
     let mut frame = vec![0u16; w * h];
     let mut render_s = 0.0;
-    for (index, pattern) in patterns.iter().enumerate() {
+    for (index, pattern) in sim.patterns.iter().enumerate() {
         let t = Instant::now();
-        camera.render(pattern, index as u64, &mut frame);
+        render(pattern, index as u64, &mut frame);
         render_s += t.elapsed().as_secs_f64();
         let image = FrameImage {
             width: w as u32,
             height: h as u32,
-            bit_depth: camera.params().bit_depth as u8,
+            bit_depth,
             data: &frame,
         };
         writer.write_frame(index, &image)?;
     }
     writer.finish()?;
-    Ok(SimulationReport {
-        frames: patterns.len(),
-        lit_pixels: camera.lit_pixels(),
-        paths: [view.count(0), view.count(1), view.count(2)],
-        gain: camera.gain(),
-        trace_s,
-        render_s_per_frame: render_s / patterns.len().max(1) as f64,
-    })
+    Ok(render_s)
 }
 
 fn write_truth(out: &Path, view: &TracedView, truth: &SurfacesFile) -> Result<(), SimError> {

@@ -1,4 +1,5 @@
-//! The Cramér–Rao bound of the screen points under the joint model.
+//! The Cramér–Rao bound of the screen points under the joint model, and
+//! under the phase-shifting one-reflection model ([`phase_shifting_cov`]).
 
 use super::model::{normal_equations, Design, Params, MAX_REFLECTIONS};
 
@@ -113,4 +114,29 @@ pub fn truth_cov_map(
         }
     }
     out
+}
+
+/// The Cramér–Rao bound of a phase-shifting pixel's screen point under the
+/// one-reflection model of [`super::phase`] at `params`, with the noise
+/// variance `variance(μ)` (counts²) of a sample of mean μ on every frame of
+/// the model's schedule: the `(u, v)` block of `(JᵀWJ)⁻¹`, px². `None` if
+/// the information is singular.
+pub fn phase_shifting_cov(
+    model: &super::phase::PhaseModel,
+    params: &super::phase::PhaseParams,
+    variance: impl Fn(f64) -> f64,
+) -> Option<[[f64; 2]; 2]> {
+    let index: Vec<u32> = (0..model.design.frames.len() as u32).collect();
+    let mut row = vec![0.0; model.len()];
+    let w: Vec<f64> = index
+        .iter()
+        .map(|&i| 1.0 / variance(model.eval(i as usize, params, &mut row)))
+        .collect();
+    let zeros = vec![0.0; index.len()];
+    let cov = model
+        .normal(&index, &zeros, &w, params)
+        .jtj
+        .cholesky()?
+        .inverse();
+    Some([[cov[(0, 0)], cov[(0, 1)]], [cov[(1, 0)], cov[(1, 1)]]])
 }

@@ -122,6 +122,11 @@ pub struct SpectralConfig {
     pub warm_starts: bool,
     /// Only fit camera pixels in `[x0, x1) × [y0, y1)` (columns, rows).
     pub roi: Option<[u32; 4]>,
+    /// The display's response, emitted luminance ∝ level^γ (the `gamma` of
+    /// `hw/display/*.toml`), modelled on phase-shifting schedules
+    /// ([`super::phase`]); `None`: a linearised display (γ = 1). Long
+    /// multi-frequency schedules do not use it.
+    pub display_gamma: Option<f64>,
 }
 
 impl Default for SpectralConfig {
@@ -137,6 +142,7 @@ impl Default for SpectralConfig {
             max_iter: 100,
             warm_starts: true,
             roi: None,
+            display_gamma: None,
         }
     }
 }

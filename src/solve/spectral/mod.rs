@@ -21,6 +21,12 @@
 //! the joint [`model`]), `scene` (the scene's number of reflections and
 //! every pixel's answer under it) and `maps` (the results and their
 //! files). [`bound`] is the Cramér–Rao bound of the schedule.
+//!
+//! Short phase-shifting schedules (a few τ, each at three or more phase
+//! steps; the rule is [`phase::PhaseSchedule::detect`]'s) take another path
+//! for one reflection: temporal phase unwrapping, a joint fit with an
+//! amplitude per τ and the display's response, and the camera's noise law
+//! pooled over the pixels ([`phase`]).
 
 mod batch;
 pub mod bound;
@@ -28,6 +34,7 @@ mod config;
 mod maps;
 pub mod model;
 pub mod periodogram;
+pub mod phase;
 pub mod pixel;
 mod prior;
 mod scene;

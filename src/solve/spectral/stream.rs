@@ -9,6 +9,7 @@ use super::batch::{CpuFits, FitBackend, FitBatch, FitSettings};
 use super::maps::SpectralMaps;
 use super::model::{Axis, Design, FrameMeta};
 use super::periodogram::SpectrumPlans;
+use super::phase::{self, PhaseModel, PhaseSchedule, PhaseSettings, Response};
 use super::pixel::PixelFits;
 use super::prior::{flat_plate_prior, GeometryPrior};
 use super::scene::{no_data, pixel_answers, scene_model};
@@ -37,6 +38,9 @@ pub struct SpectralSolver {
     received: usize,
     max_seen: u16,
     config: SpectralConfig,
+    /// A phase-shifting schedule's groups and the display's response: the
+    /// one-reflection path of [`phase`] instead of the periodogram's.
+    phase: Option<(PhaseSchedule, Response)>,
     /// The solve's output arrays, allocated and written (their pages
     /// faulted in) on a thread of their own while the frames stream in,
     /// not after the last one; the first solve takes them.
@@ -116,10 +120,20 @@ impl SpectralSolver {
                 camera_height: camera.height,
             });
         }
+        let phase = match PhaseSchedule::detect(&design) {
+            Some(s) => Some((s, Response::new(config.display_gamma.unwrap_or(1.0))?)),
+            None => None,
+        };
         let plans = SpectrumPlans::new(&design);
         let prior = GeometryPrior::new(view, &config);
         let series_bytes = prior.candidates.len() * design.frames.len() * 2;
         let use_stats = match config.engine {
+            _ if phase.is_some() => {
+                if config.engine == Engine::Statistics {
+                    log::info!("phase-shifting schedule: the series engine is used (a few frames per pixel)");
+                }
+                false
+            }
             Engine::Series => false,
             Engine::Statistics => true,
             Engine::Auto => series_bytes > SERIES_LIMIT_BYTES,
@@ -152,6 +166,7 @@ impl SpectralSolver {
             received: 0,
             max_seen: 0,
             config,
+            phase,
             prepared,
         })
     }
@@ -282,6 +297,9 @@ impl SpectralSolver {
             });
         }
         let sat = self.saturation();
+        if let Some((schedule, response)) = &self.phase {
+            return Ok(self.solve_phase(schedule, response, sat));
+        }
         let prepared = self.prepared.take().and_then(|h| h.join().ok());
         let (fits_out, pixels_out) = match prepared {
             Some(p) => (Some(p.fits), Some(p.pixels)),
@@ -322,6 +340,46 @@ impl SpectralSolver {
             bic_sums,
             saturation_counts: sat,
         })
+    }
+
+    /// The phase-shifting path ([`phase`]): one reflection per pixel.
+    fn solve_phase(
+        &self,
+        schedule: &PhaseSchedule,
+        response: &Response,
+        saturation: Option<u16>,
+    ) -> SpectralMaps {
+        let model = PhaseModel {
+            design: &self.design,
+            schedule,
+            response,
+        };
+        let settings = PhaseSettings {
+            saturation,
+            kappa0: self.config.kappa_start(&self.design),
+            max_iter: self.config.max_iter,
+        };
+        let fits = phase::solve_all(&model, &self.series, settings);
+        let bic_one = fits
+            .iter()
+            .filter_map(|f| f.per_model[0].map(|s| s.bic))
+            .sum();
+        let (pixels, preferred) = pixel_answers(&fits, &self.prior, 1, None);
+        SpectralMaps {
+            width: self.width,
+            height: self.height,
+            pixels,
+            preferred,
+            scene_model: 1,
+            bic_sums: [bic_one, 0.0, 0.0],
+            saturation_counts: saturation,
+        }
+    }
+
+    /// The phase-shifting schedule's groups and the display response, when
+    /// the schedule is one ([`PhaseSchedule::detect`]).
+    pub fn phase_schedule(&self) -> Option<(&PhaseSchedule, &Response)> {
+        self.phase.as_ref().map(|(s, r)| (s, r))
     }
 
     /// The model's view of the schedule.
