@@ -8,3 +8,11 @@
 //! the spectral stage.
 
 pub mod session_file;
+pub mod adjust;
+pub mod error;
+pub mod input;
+pub mod params;
+pub mod residuals;
+pub mod resect;
+pub mod calibration;
+pub mod report;

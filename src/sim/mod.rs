@@ -17,6 +17,7 @@ mod gige_feed;
 mod render;
 mod scene;
 mod screen;
+pub mod session;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -56,6 +57,9 @@ pub enum SimError {
     /// Writing the station copy failed.
     #[error(transparent)]
     Station(#[from] StationError),
+    /// Writing a target frame failed.
+    #[error(transparent)]
+    Image(#[from] crate::formats::image_io::ImageError),
     /// Writing the truth surfaces failed.
     #[error(transparent)]
     Surfaces(#[from] SurfacesFileError),

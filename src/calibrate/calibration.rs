@@ -1,0 +1,199 @@
+//! The calibration's single entry point, [`calibrate`]: the world frame's
+//! plane from the flat points (linear), the camera by resection, the screen
+//! from the flat's fringe map, then one joint adjustment of everything
+//! against all the data; and what it writes ([`Calibration::write`]):
+//! `station.toml` (`mfd-station/2`), `station_uncertainty.toml`
+//! (`mfd-station-uncertainty/1`) and `report.json`.
+
+use std::path::Path;
+
+use nalgebra::{DMatrix, Vector3};
+
+use super::adjust::adjust;
+use super::error::CalibrationError;
+use super::input::CalibrationInput;
+use super::params::{Param, State, WorldFrame, STATION_DOFS};
+use super::report::{Report, StepReport};
+use super::resect::resect;
+use super::residuals::Blocks;
+use crate::optics::station::{Pose, Station};
+
+/// The fewest flat points that define a plane.
+pub const MIN_FLAT_POINTS: usize = 3;
+
+/// The calibrated station, its uncertainty and the report.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The calibrated station (`mfd-station/2`), world frame of the session.
+    pub station: Station,
+    /// The world frame in the stage frame.
+    pub frame: WorldFrame,
+    /// Every parameter of the joint adjustment (the plane's and the
+    /// station's, estimated first, then held), by name.
+    pub names: Vec<String>,
+    /// Their covariance (held ones with their prior σ and its effect on the
+    /// estimated ones).
+    pub covariance: DMatrix<f64>,
+    /// 1 σ of what the session gave: `element.thickness_mm`, `element.refractive_index`.
+    pub given_std: Vec<(String, f64)>,
+    /// The report.
+    pub report: Report,
+}
+
+/// The element's pose from the element points: the plane through them in
+/// the world frame (its height at the pivot and its tilts); identity
+/// without points.
+fn element_start(input: &CalibrationInput, frame: &WorldFrame, station: &Station) -> Pose {
+    let pts: Vec<Vector3<f64>> = input
+        .element_points_stage_mm
+        .iter()
+        .map(|p| frame.to_world(p).coords)
+        .collect();
+    let c = station.element.aperture_center_mm;
+    match WorldFrame::fit(&pts, [c.x, c.y]) {
+        Some(plane) if pts.len() >= MIN_FLAT_POINTS => {
+            let [z, sx, sy] = plane.plane;
+            Pose {
+                offset_mm: Vector3::new(0.0, 0.0, z),
+                tilt_deg: [sy.atan().to_degrees(), (-sx).atan().to_degrees()],
+            }
+        }
+        _ => Pose::default(),
+    }
+}
+
+fn check_points(input: &CalibrationInput) -> Result<WorldFrame, CalibrationError> {
+    let n = input.flat_points_stage_mm.len();
+    if n < MIN_FLAT_POINTS {
+        return Err(CalibrationError::TooFew {
+            entry: "flat_point",
+            found: n,
+            needed: MIN_FLAT_POINTS,
+        });
+    }
+    let m = input.element_points_stage_mm.len();
+    if m > 0 && m < MIN_FLAT_POINTS {
+        return Err(CalibrationError::TooFew {
+            entry: "element_point",
+            found: m,
+            needed: MIN_FLAT_POINTS,
+        });
+    }
+    WorldFrame::fit(&input.flat_points_stage_mm, input.element_center_stage_mm).ok_or(
+        CalibrationError::Degenerate {
+            entry: "flat_point",
+            problem: "lie on one line: add a point off that line".into(),
+        },
+    )
+}
+
+/// Calibrates a station from a session's numbers.
+///
+/// # Errors
+/// [`CalibrationError`] naming the session entry that is missing or
+/// degenerate, or the step that did not converge.
+pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationError> {
+    let frame = check_points(input)?;
+    let mut station = input.nominal.clone();
+    station.element.thickness_mm = input.thickness_mm.0;
+    station.element.refractive_index = input.refractive_index.0;
+    station.element.pose = element_start(input, &frame, &station);
+    let start = State { frame, station };
+    let camera = resect(input, &start)?;
+    let screen_blocks = Blocks {
+        flat_points: false,
+        element_points: false,
+        targets: false,
+        flat_map: true,
+    };
+    let screen_params: Vec<Param> = dofs_of("screen.");
+    let screen = adjust(input, camera.state.clone(), &screen_params, screen_blocks, "screen")?;
+    let mut all = vec![Param::PlaneHeight, Param::PlaneSlopeX, Param::PlaneSlopeY];
+    all.extend(STATION_DOFS.iter().map(|d| Param::Station(d.name)));
+    let joint = adjust(input, screen.state.clone(), &all, Blocks::ALL, "joint")?;
+    let steps = vec![
+        StepReport::new("resection", input, &camera, resection_blocks()),
+        StepReport::new("screen", input, &screen, screen_blocks),
+        StepReport::new("joint", input, &joint, Blocks::ALL),
+    ];
+    let report = Report::new(input, steps);
+    let station = joint.state.station.clone();
+    Station::from_file(&station.to_file(), Path::new("<calibrated station>"))
+        .map_err(|source| CalibrationError::InvalidResult { source })?;
+    Ok(Calibration {
+        station,
+        frame: joint.state.frame,
+        names: joint.params.iter().map(|p| p.name().to_string()).collect(),
+        covariance: joint.covariance.clone(),
+        given_std: vec![
+            ("element.thickness_mm".into(), input.thickness_mm.1),
+            ("element.refractive_index".into(), input.refractive_index.1),
+        ],
+        report,
+    })
+}
+
+fn resection_blocks() -> Blocks {
+    Blocks {
+        flat_points: false,
+        element_points: false,
+        targets: true,
+        flat_map: false,
+    }
+}
+
+fn dofs_of(prefix: &str) -> Vec<Param> {
+    STATION_DOFS
+        .iter()
+        .filter(|d| d.name.starts_with(prefix))
+        .map(|d| Param::Station(d.name))
+        .collect()
+}
+
+impl Calibration {
+    /// The covariance over the station's degrees of freedom alone (the
+    /// plane's marginalised out), with their names.
+    pub fn station_covariance(&self) -> (Vec<String>, DMatrix<f64>) {
+        let keep: Vec<usize> = (0..self.names.len())
+            .filter(|&i| !self.names[i].starts_with("frame."))
+            .collect();
+        let m = DMatrix::from_fn(keep.len(), keep.len(), |i, j| self.covariance[(keep[i], keep[j])]);
+        (keep.iter().map(|&i| self.names[i].clone()).collect(), m)
+    }
+
+    /// Writes `station.toml`, `station_uncertainty.toml` and `report.json`
+    /// into `dir` (created if missing).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Io`] naming the file.
+    pub fn write(&self, dir: &Path) -> Result<(), CalibrationError> {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| CalibrationError::Io { path, source }
+        };
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        let station = dir.join("station.toml");
+        std::fs::write(&station, self.station.to_toml_string()).map_err(io(&station))?;
+        let unc = dir.join("station_uncertainty.toml");
+        std::fs::write(&unc, self.uncertainty_toml("station.toml")).map_err(io(&unc))?;
+        let report = dir.join("report.json");
+        std::fs::write(&report, self.report.to_json()).map_err(io(&report))?;
+        Ok(())
+    }
+
+    /// `mfd-station-uncertainty/1` text: the full covariance of the
+    /// station's degrees of freedom, `[std]` for the given thickness and index.
+    pub fn uncertainty_toml(&self, station_file: &str) -> String {
+        let (names, m) = self.station_covariance();
+        let matrix: Vec<Vec<f64>> = (0..m.nrows())
+            .map(|i| (0..m.ncols()).map(|j| 0.5 * (m[(i, j)] + m[(j, i)])).collect())
+            .collect();
+        let file = super::report::UncertaintyFile {
+            format: "mfd-station-uncertainty/1".into(),
+            station: station_file.into(),
+            std: self.given_std.iter().cloned().collect(),
+            covariance: super::report::CovarianceTable { names, matrix },
+        };
+        toml::to_string(&file).unwrap_or_default()
+    }
+}

@@ -1,0 +1,338 @@
+//! The adjustment's unknowns: the world frame's plane (3 numbers, in the
+//! stage frame) and the station's degrees of freedom of
+//! `mfd-station-uncertainty/1`, each a small change applied to the station
+//! exactly as `interchange.md`'s table says. A step of the adjustment is a
+//! vector of such changes; the covariance it reports is in the same
+//! coordinates, so it is the station uncertainty file's covariance as it is.
+
+use nalgebra::{Point3, Rotation3, Unit, Vector3};
+
+use crate::optics::station::{Distortion, Station};
+
+/// One unknown of the adjustment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Param {
+    /// The flat plane's stage z at the element's centre, mm.
+    PlaneHeight,
+    /// The flat plane's slope `dz/dx` in the stage frame.
+    PlaneSlopeX,
+    /// The flat plane's slope `dz/dy` in the stage frame.
+    PlaneSlopeY,
+    /// A station degree of freedom, by its `mfd-station-uncertainty/1` name.
+    Station(&'static str),
+}
+
+/// What the adjustment knows of a station degree of freedom before any
+/// data: the finite-difference step of its Jacobian column (small against
+/// any σ a session reaches, large against the residuals' rounding) and the
+/// range the nominal station may be off by. A parameter whose marginal σ
+/// from the data is not below its prior range is held at its nominal value
+/// with that range as its σ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DofPrior {
+    /// The name in `mfd-station-uncertainty/1`.
+    pub name: &'static str,
+    /// Central-difference step, in the DOF's unit.
+    pub step: f64,
+    /// 1 σ the nominal station may be off by, in the DOF's unit.
+    pub prior_std: f64,
+}
+
+const fn dof(name: &'static str, step: f64, prior_std: f64) -> DofPrior {
+    DofPrior {
+        name,
+        step,
+        prior_std,
+    }
+}
+
+/// The station degrees of freedom a calibration may estimate (all of
+/// `mfd-station-uncertainty/1` but the element's thickness and index, which
+/// the session measures and gives). Prior ranges: a station assembled to
+/// drawings is off by millimetres and tenths of a degree (10 mm and 2° are
+/// generous bounds); a lens's focal length by well under a millimetre, its
+/// principal point by tens of pixels, its distortion coefficients by their
+/// own size on common lenses (0.5 radial, 0.01 tangential). The screen's
+/// pitch is a lithographic datasheet value, 1e-4 of 0.27 mm. The element's
+/// in-plane position is where the operator centred the PSM on it (0.1 mm);
+/// without element points its height and tilts are what placing it where
+/// the flat stood leaves open (0.05 mm, 0.05°).
+pub const STATION_DOFS: [DofPrior; 26] = [
+    dof("camera.x_mm", 1e-4, 10.0),
+    dof("camera.y_mm", 1e-4, 10.0),
+    dof("camera.z_mm", 1e-4, 10.0),
+    dof("camera.rx_deg", 1e-5, 2.0),
+    dof("camera.ry_deg", 1e-5, 2.0),
+    dof("camera.rz_deg", 1e-5, 2.0),
+    dof("camera.focal_length_mm", 1e-5, 1.0),
+    dof("camera.cx_px", 1e-3, 50.0),
+    dof("camera.cy_px", 1e-3, 50.0),
+    dof("camera.k1", 1e-6, 0.5),
+    dof("camera.k2", 1e-6, 0.5),
+    dof("camera.k3", 1e-6, 0.5),
+    dof("camera.p1", 1e-7, 0.01),
+    dof("camera.p2", 1e-7, 0.01),
+    dof("screen.x_mm", 1e-4, 10.0),
+    dof("screen.y_mm", 1e-4, 10.0),
+    dof("screen.z_mm", 1e-4, 10.0),
+    dof("screen.rx_deg", 1e-5, 2.0),
+    dof("screen.ry_deg", 1e-5, 2.0),
+    dof("screen.rz_deg", 1e-5, 2.0),
+    dof("screen.pixel_pitch_mm", 1e-7, 2.7e-5),
+    dof("element.x_mm", 1e-4, 0.1),
+    dof("element.y_mm", 1e-4, 0.1),
+    dof("element.z_mm", 1e-5, 0.05),
+    dof("element.rx_deg", 1e-6, 0.05),
+    dof("element.ry_deg", 1e-6, 0.05),
+];
+
+/// Finite-difference steps of the plane's parameters: height (mm) and slopes.
+const PLANE_STEPS: [f64; 3] = [1e-5, 1e-8, 1e-8];
+
+/// The prior of a station DOF by name.
+pub fn prior(name: &str) -> Option<&'static DofPrior> {
+    STATION_DOFS.iter().find(|d| d.name == name)
+}
+
+impl Param {
+    /// The name in reports (the station DOFs' own; `frame.*` for the plane).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Param::PlaneHeight => "frame.height_mm",
+            Param::PlaneSlopeX => "frame.slope_x",
+            Param::PlaneSlopeY => "frame.slope_y",
+            Param::Station(n) => n,
+        }
+    }
+
+    /// The central-difference step of its Jacobian column.
+    pub fn step(&self) -> f64 {
+        match self {
+            Param::PlaneHeight => PLANE_STEPS[0],
+            Param::PlaneSlopeX => PLANE_STEPS[1],
+            Param::PlaneSlopeY => PLANE_STEPS[2],
+            Param::Station(n) => prior(n).map_or(1e-6, |d| d.step),
+        }
+    }
+
+    /// The 1 σ it is held with when the data do not determine it; the
+    /// plane is always determined by the flat points (`None`).
+    pub fn prior_std(&self) -> Option<f64> {
+        match self {
+            Param::Station(n) => prior(n).map(|d| d.prior_std),
+            _ => None,
+        }
+    }
+}
+
+/// The world frame a session defines (`calibration.md`), from the plane
+/// through the flat points `z = height + sx (x − cx) + sy (y − cy)` in the
+/// stage frame and the element's centre `(cx, cy)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorldFrame {
+    /// `[height_mm, slope_x, slope_y]` of the plane, stage frame.
+    pub plane: [f64; 3],
+    /// Stage x, y of the element's centre, mm.
+    pub center_stage_mm: [f64; 2],
+}
+
+impl WorldFrame {
+    /// Rotation whose columns are the world axes in stage coordinates:
+    /// `z` the plane's normal on the stage's `+z` side, `x` the stage's x
+    /// projected onto the plane, `y = z × x`.
+    pub fn stage_from_world(&self) -> Rotation3<f64> {
+        let [_, sx, sy] = self.plane;
+        let z = Vector3::new(-sx, -sy, 1.0).normalize();
+        let x = (Vector3::x() - z.x * z).normalize();
+        let y = z.cross(&x);
+        Rotation3::from_basis_unchecked(&[x, y, z])
+    }
+
+    /// The world origin in the stage frame.
+    pub fn origin_stage_mm(&self) -> Vector3<f64> {
+        let [cx, cy] = self.center_stage_mm;
+        Vector3::new(cx, cy, self.plane[0])
+    }
+
+    /// World position of a stage reading.
+    pub fn to_world(&self, stage_mm: &Vector3<f64>) -> Point3<f64> {
+        Point3::from(self.stage_from_world().inverse() * (stage_mm - self.origin_stage_mm()))
+    }
+
+    /// Stage reading of a world position.
+    pub fn to_stage(&self, world: &Point3<f64>) -> Vector3<f64> {
+        self.stage_from_world() * world.coords + self.origin_stage_mm()
+    }
+
+    /// The linear least-squares plane through stage readings (at least 3,
+    /// not on one line); `None` where they do not span a plane.
+    pub fn fit(points: &[Vector3<f64>], center_stage_mm: [f64; 2]) -> Option<WorldFrame> {
+        let [cx, cy] = center_stage_mm;
+        let rows = points.len();
+        let a = nalgebra::DMatrix::from_fn(rows, 3, |r, c| match c {
+            0 => 1.0,
+            1 => points[r].x - cx,
+            _ => points[r].y - cy,
+        });
+        let b = nalgebra::DVector::from_fn(rows, |r, _| points[r].z);
+        let sol = (a.transpose() * &a).cholesky()?.solve(&(a.transpose() * b));
+        Some(WorldFrame {
+            plane: [sol[0], sol[1], sol[2]],
+            center_stage_mm,
+        })
+    }
+}
+
+/// A point of the adjustment: the world frame's plane and the station in
+/// that frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    /// The world frame.
+    pub frame: WorldFrame,
+    /// The station, world frame.
+    pub station: Station,
+}
+
+impl State {
+    /// This state with one parameter changed by `delta`.
+    pub fn perturbed(&self, p: Param, delta: f64) -> State {
+        let mut s = self.clone();
+        match p {
+            Param::PlaneHeight => s.frame.plane[0] += delta,
+            Param::PlaneSlopeX => s.frame.plane[1] += delta,
+            Param::PlaneSlopeY => s.frame.plane[2] += delta,
+            Param::Station(name) => perturb_station(&mut s.station, name, delta),
+        }
+        s
+    }
+}
+
+fn rot(axis: usize, deg: f64) -> Rotation3<f64> {
+    let a = [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()][axis];
+    Rotation3::from_axis_angle(&a, deg.to_radians())
+}
+
+/// Applies one degree of freedom's change, exactly as
+/// `mfd-station-uncertainty/1` defines it. Unknown names change nothing
+/// (the names come from [`STATION_DOFS`]).
+pub fn perturb_station(s: &mut Station, name: &str, delta: f64) {
+    let axis = |c: char| match c {
+        'x' => 0,
+        'y' => 1,
+        _ => 2,
+    };
+    let (part, field) = name.split_once('.').unwrap_or((name, ""));
+    let first = field.chars().next().unwrap_or(' ');
+    match (part, field) {
+        ("camera", "x_mm" | "y_mm" | "z_mm") => s.camera.position_mm[axis(first)] += delta,
+        ("camera", "rx_deg" | "ry_deg" | "rz_deg") => {
+            let a = axis(field.chars().nth(1).unwrap_or('z'));
+            s.camera.world_from_camera = rot(a, delta) * s.camera.world_from_camera;
+        }
+        ("camera", "focal_length_mm") => s.camera.focal_length_mm += delta,
+        ("camera", "cx_px") => s.camera.principal_point_px.x += delta,
+        ("camera", "cy_px") => s.camera.principal_point_px.y += delta,
+        ("camera", "k1" | "k2" | "k3" | "p1" | "p2") => {
+            let d = s.camera.distortion.get_or_insert(Distortion {
+                k: [0.0; 3],
+                p: [0.0; 2],
+            });
+            let i = usize::from(field.as_bytes()[1] - b'1');
+            if first == 'k' {
+                d.k[i] += delta;
+            } else {
+                d.p[i] += delta;
+            }
+        }
+        ("screen", "x_mm" | "y_mm" | "z_mm") => s.screen.origin_mm[axis(first)] += delta,
+        ("screen", "rx_deg" | "ry_deg" | "rz_deg") => {
+            let r = rot(axis(field.chars().nth(1).unwrap_or('z')), delta);
+            let q = s.screen.centre();
+            s.screen.origin_mm = q + r * (s.screen.origin_mm - q);
+            s.screen.u_axis = Unit::new_normalize(r * s.screen.u_axis.into_inner());
+            s.screen.v_axis = Unit::new_normalize(r * s.screen.v_axis.into_inner());
+        }
+        ("screen", "pixel_pitch_mm") => {
+            let q = s.screen.centre();
+            s.screen.pixel_pitch_mm += delta;
+            let half = 0.5 * s.screen.pixel_pitch_mm;
+            s.screen.origin_mm = q
+                - half
+                    * (f64::from(s.screen.width) * s.screen.u_axis.as_ref()
+                        + f64::from(s.screen.height) * s.screen.v_axis.as_ref());
+        }
+        ("element", "x_mm" | "y_mm" | "z_mm") => s.element.pose.offset_mm[axis(first)] += delta,
+        ("element", "rx_deg") => s.element.pose.tilt_deg[0] += delta,
+        ("element", "ry_deg") => s.element.pose.tilt_deg[1] += delta,
+        ("element", "thickness_mm") => s.element.thickness_mm += delta,
+        ("element", "refractive_index") => s.element.refractive_index += delta,
+        _ => {}
+    }
+}
+
+/// The change `d` (in the DOFs' coordinates, to first order) that takes
+/// `from` to `to`: `to ≈ from` with every DOF of `names` changed by `d`.
+/// Rotations are read off `R_to R_fromᵀ` as small world-axis angles; the
+/// screen's position is its origin after the rotation about its centre.
+pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
+    let small_angles = |r: Rotation3<f64>| r.scaled_axis().map(f64::to_degrees);
+    let cam_w = small_angles(to.station.camera.world_from_camera * from.station.camera.world_from_camera.inverse());
+    let (sf, st) = (&from.station.screen, &to.station.screen);
+    let basis = |s: &crate::optics::station::Screen| {
+        nalgebra::Matrix3::from_columns(&[s.u_axis.into_inner(), s.v_axis.into_inner(), s.normal().into_inner()])
+    };
+    let scr_r = Rotation3::from_matrix(&(basis(st) * basis(sf).transpose()));
+    let scr_w = small_angles(scr_r);
+    // Rotations and the pitch keep the centre: the position DOFs are its shift.
+    let shift = st.centre() - sf.centre();
+    let zero = Distortion {
+        k: [0.0; 3],
+        p: [0.0; 2],
+    };
+    let a = from.station.camera.distortion.unwrap_or(zero);
+    let b = to.station.camera.distortion.unwrap_or(zero);
+    let dk = [0, 1, 2].map(|i| b.k[i] - a.k[i]);
+    let dp = [0, 1].map(|i| b.p[i] - a.p[i]);
+    let (ef, et) = (&from.station.element.pose, &to.station.element.pose);
+    params
+        .iter()
+        .map(|p| match p {
+            Param::PlaneHeight => to.frame.plane[0] - from.frame.plane[0],
+            Param::PlaneSlopeX => to.frame.plane[1] - from.frame.plane[1],
+            Param::PlaneSlopeY => to.frame.plane[2] - from.frame.plane[2],
+            Param::Station(n) => match *n {
+                "camera.x_mm" => to.station.camera.position_mm.x - from.station.camera.position_mm.x,
+                "camera.y_mm" => to.station.camera.position_mm.y - from.station.camera.position_mm.y,
+                "camera.z_mm" => to.station.camera.position_mm.z - from.station.camera.position_mm.z,
+                "camera.rx_deg" => cam_w.x,
+                "camera.ry_deg" => cam_w.y,
+                "camera.rz_deg" => cam_w.z,
+                "camera.focal_length_mm" => to.station.camera.focal_length_mm - from.station.camera.focal_length_mm,
+                "camera.cx_px" => to.station.camera.principal_point_px.x - from.station.camera.principal_point_px.x,
+                "camera.cy_px" => to.station.camera.principal_point_px.y - from.station.camera.principal_point_px.y,
+                "camera.k1" => dk[0],
+                "camera.k2" => dk[1],
+                "camera.k3" => dk[2],
+                "camera.p1" => dp[0],
+                "camera.p2" => dp[1],
+                "screen.x_mm" => shift.x,
+                "screen.y_mm" => shift.y,
+                "screen.z_mm" => shift.z,
+                "screen.rx_deg" => scr_w.x,
+                "screen.ry_deg" => scr_w.y,
+                "screen.rz_deg" => scr_w.z,
+                "screen.pixel_pitch_mm" => st.pixel_pitch_mm - sf.pixel_pitch_mm,
+                "element.x_mm" => et.offset_mm.x - ef.offset_mm.x,
+                "element.y_mm" => et.offset_mm.y - ef.offset_mm.y,
+                "element.z_mm" => et.offset_mm.z - ef.offset_mm.z,
+                "element.rx_deg" => et.tilt_deg[0] - ef.tilt_deg[0],
+                "element.ry_deg" => et.tilt_deg[1] - ef.tilt_deg[1],
+                "element.thickness_mm" => to.station.element.thickness_mm - from.station.element.thickness_mm,
+                "element.refractive_index" => {
+                    to.station.element.refractive_index - from.station.element.refractive_index
+                }
+                _ => 0.0,
+            },
+        })
+        .collect()
+}

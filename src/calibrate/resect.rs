@@ -1,0 +1,212 @@
+//! The camera by resection: a linear start by the direct linear transform
+//! (DLT, Hartley's normalised form) from at least six world points and
+//! their centroids, decomposed into position, rotation, focal length and
+//! principal point; then the weighted least squares over those and the
+//! distortion ([`super::adjust::adjust`] over the camera's degrees of
+//! freedom against the targets alone).
+//!
+//! Hand-written: the DLT is a 12-unknown null vector and an RQ
+//! decomposition, a few lines over nalgebra's SVD and QR; no crate in the
+//! stack does camera resection.
+
+use nalgebra::{DMatrix, Matrix3, Matrix3x4, Point2, Point3, Rotation3, Vector3};
+
+use super::adjust::{adjust, Adjusted};
+use super::error::CalibrationError;
+use super::input::CalibrationInput;
+use super::params::{Param, State, STATION_DOFS};
+use super::residuals::Blocks;
+use crate::optics::station::{Camera, Distortion};
+
+/// The fewest targets a DLT solves with (11 unknowns, 2 equations each).
+pub const MIN_TARGETS: usize = 6;
+
+/// The camera's degrees of freedom, in [`STATION_DOFS`] order.
+pub fn camera_params() -> Vec<Param> {
+    STATION_DOFS
+        .iter()
+        .filter(|d| d.name.starts_with("camera."))
+        .map(|d| Param::Station(d.name))
+        .collect()
+}
+
+/// A similarity `T` taking points to zero mean and RMS distance `√dim`.
+fn normaliser<const D: usize>(pts: &[[f64; D]]) -> ([f64; D], f64) {
+    let n = pts.len() as f64;
+    let mut mean = [0.0; D];
+    for p in pts {
+        for k in 0..D {
+            mean[k] += p[k] / n;
+        }
+    }
+    let rms = (pts
+        .iter()
+        .map(|p| (0..D).map(|k| (p[k] - mean[k]).powi(2)).sum::<f64>())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    (mean, (D as f64).sqrt() / rms.max(f64::MIN_POSITIVE))
+}
+
+/// The 3×4 projection matrix (pixel ∝ P [X; 1]) by normalised DLT.
+pub fn dlt(world: &[Point3<f64>], pixels: &[Point2<f64>]) -> Option<Matrix3x4<f64>> {
+    let n = world.len();
+    if n < MIN_TARGETS || pixels.len() != n {
+        return None;
+    }
+    let w: Vec<[f64; 3]> = world.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let x: Vec<[f64; 2]> = pixels.iter().map(|p| [p.x, p.y]).collect();
+    let (wm, ws) = normaliser(&w);
+    let (xm, xs) = normaliser(&x);
+    let mut a = DMatrix::zeros(2 * n, 12);
+    for k in 0..n {
+        let xw = [0, 1, 2].map(|c| (w[k][c] - wm[c]) * ws);
+        let hom = [xw[0], xw[1], xw[2], 1.0];
+        let (u, v) = ((x[k][0] - xm[0]) * xs, (x[k][1] - xm[1]) * xs);
+        for c in 0..4 {
+            a[(2 * k, c)] = hom[c];
+            a[(2 * k, 8 + c)] = -u * hom[c];
+            a[(2 * k + 1, 4 + c)] = hom[c];
+            a[(2 * k + 1, 8 + c)] = -v * hom[c];
+        }
+    }
+    let svd = (a.transpose() * &a).symmetric_eigen();
+    let (imin, _) = svd.eigenvalues.argmin();
+    let p = svd.eigenvectors.column(imin);
+    let pn = Matrix3x4::from_fn(|r, c| p[4 * r + c]);
+    let t_x = Matrix3::new(xs, 0.0, -xs * xm[0], 0.0, xs, -xs * xm[1], 0.0, 0.0, 1.0);
+    let mut t_w = nalgebra::Matrix4::identity() * ws;
+    t_w[(3, 3)] = 1.0;
+    for c in 0..3 {
+        t_w[(c, 3)] = -ws * wm[c];
+    }
+    t_x.try_inverse().map(|ti| ti * pn * t_w)
+}
+
+/// Position, rotation, focal length (px) and principal point of a
+/// projection matrix (RQ of its left 3×3), with the points in front.
+pub fn decompose(p: &Matrix3x4<f64>, world: &[Point3<f64>]) -> Option<(Point3<f64>, Rotation3<f64>, f64, Point2<f64>)> {
+    let mut p = *p;
+    let m: Matrix3<f64> = p.fixed_view::<3, 3>(0, 0).into();
+    let centre = -(m.try_inverse()? * p.column(3));
+    // Points in front: the third row's depth is positive for them.
+    let depth = |pm: &Matrix3x4<f64>, x: &Point3<f64>| (pm * x.to_homogeneous())[2];
+    if depth(&p, &world[0]) < 0.0 {
+        p = -p;
+    }
+    let m: Matrix3<f64> = p.fixed_view::<3, 3>(0, 0).into();
+    let flip = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0);
+    let qr = (flip * m).transpose().qr();
+    let (q, r) = (qr.q(), qr.r());
+    let mut k = flip * r.transpose() * flip;
+    let mut rot = flip * q.transpose();
+    let signs = Matrix3::from_diagonal(&Vector3::from_fn(|i, _| k[(i, i)].signum()));
+    k *= signs;
+    rot = signs * rot;
+    if rot.determinant() < 0.0 {
+        return None;
+    }
+    k /= k[(2, 2)];
+    let f = 0.5 * (k[(0, 0)] + k[(1, 1)]);
+    let camera_from_world = Rotation3::from_matrix(&rot);
+    Some((Point3::from(centre), camera_from_world.inverse(), f, Point2::new(k[(0, 2)], k[(1, 2)])))
+}
+
+/// The DLT camera from the targets at `state`'s world frame, with the
+/// nominal's sensor and distortion (the values a held coefficient keeps);
+/// `None` where the DLT fails.
+pub fn linear_start(input: &CalibrationInput, state: &State) -> Option<Camera> {
+    let world: Vec<Point3<f64>> = input.targets.iter().map(|t| state.frame.to_world(&t.stage_mm)).collect();
+    let pixels: Vec<Point2<f64>> = input.targets.iter().map(|t| t.pixel).collect();
+    let p = dlt(&world, &pixels)?;
+    let (c, r, f_px, pp) = decompose(&p, &world)?;
+    let nominal = &state.station.camera;
+    let cam = Camera {
+        position_mm: c,
+        world_from_camera: r,
+        focal_length_mm: f_px * nominal.pixel_pitch_mm,
+        principal_point_px: pp,
+        distortion: Some(nominal.distortion.unwrap_or(Distortion {
+            k: [0.0; 3],
+            p: [0.0; 2],
+        })),
+        ..nominal.clone()
+    };
+    (cam.focal_length_mm.is_finite() && cam.focal_length_mm > 0.0).then_some(cam)
+}
+
+/// The camera by resection from `state` (its frame held): the DLT start
+/// where it reprojects the targets better than the nominal camera, then the
+/// weighted least squares over the camera's degrees of freedom.
+///
+/// # Errors
+/// [`CalibrationError::TooFew`] with fewer than six targets,
+/// [`CalibrationError::Degenerate`] when they are coplanar, or the
+/// adjustment's.
+pub fn resect(input: &CalibrationInput, state: &State) -> Result<Adjusted, CalibrationError> {
+    if input.targets.len() < MIN_TARGETS {
+        return Err(CalibrationError::TooFew {
+            entry: "target_point",
+            found: input.targets.len(),
+            needed: MIN_TARGETS,
+        });
+    }
+    let world: Vec<Point3<f64>> = input.targets.iter().map(|t| state.frame.to_world(&t.stage_mm)).collect();
+    if coplanar(&world) {
+        return Err(CalibrationError::Degenerate {
+            entry: "target_point",
+            problem: "lie in one plane: place targets at two or more heights".into(),
+        });
+    }
+    let blocks = Blocks {
+        flat_points: false,
+        element_points: false,
+        targets: true,
+        flat_map: false,
+    };
+    let mut start = state.clone();
+    if let Some(cam) = linear_start(input, state) {
+        let dlt_state = State {
+            station: crate::optics::station::Station {
+                camera: cam,
+                ..state.station.clone()
+            },
+            ..state.clone()
+        };
+        if reprojection_ss(input, &dlt_state) < reprojection_ss(input, state) {
+            start = dlt_state;
+        }
+    }
+    adjust(input, start, &camera_params(), blocks, "resection")
+}
+
+fn reprojection_ss(input: &CalibrationInput, state: &State) -> f64 {
+    let ss: f64 = input
+        .targets
+        .iter()
+        .map(|t| {
+            state
+                .station
+                .camera
+                .project(&state.frame.to_world(&t.stage_mm))
+                .map_or(f64::INFINITY, |p| (p - t.pixel).norm_squared())
+        })
+        .sum();
+    if ss.is_finite() {
+        ss
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Whether points lie within a micrometre of one plane (their scatter's
+/// smallest principal axis).
+fn coplanar(pts: &[Point3<f64>]) -> bool {
+    let n = pts.len() as f64;
+    let mean = pts.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let cov = pts
+        .iter()
+        .fold(Matrix3::zeros(), |a, p| a + (p.coords - mean) * (p.coords - mean).transpose())
+        / n;
+    cov.symmetric_eigenvalues().min().max(0.0).sqrt() < 1e-3
+}
