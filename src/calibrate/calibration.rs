@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix2, Point2, Vector3};
 
 use super::adjust::adjust;
 use super::error::CalibrationError;
@@ -15,7 +15,7 @@ use super::input::CalibrationInput;
 use super::params::{Param, State, WorldFrame, STATION_DOFS};
 use super::report::{Report, StepReport};
 use super::resect::resect;
-use super::residuals::Blocks;
+use super::residuals::{flat_reflection_uv, Blocks};
 use crate::optics::station::{Pose, Station};
 
 /// The fewest flat points that define a plane.
@@ -79,12 +79,27 @@ fn check_points(input: &CalibrationInput) -> Result<WorldFrame, CalibrationError
             needed: MIN_FLAT_POINTS,
         });
     }
-    WorldFrame::fit(&input.flat_points_stage_mm, input.element_center_stage_mm).ok_or(
-        CalibrationError::Degenerate {
-            entry: "flat_point",
-            problem: "lie on one line: add a point off that line".into(),
-        },
-    )
+    let line = CalibrationError::Degenerate {
+        entry: "flat_point",
+        problem: "lie on one line: add a point off that line".into(),
+    };
+    // Across a line of points the plane's tilt is known to σ_stage over
+    // their spread: ten readings' σ of spread leaves it at 0.1 rad, no plane.
+    if smallest_spread_xy(&input.flat_points_stage_mm) < 10.0 * input.stage_std_mm {
+        return Err(line);
+    }
+    WorldFrame::fit(&input.flat_points_stage_mm, input.element_center_stage_mm).ok_or(line)
+}
+
+/// The smallest principal standard deviation of the points' x, y, mm.
+fn smallest_spread_xy(points: &[Vector3<f64>]) -> f64 {
+    let n = points.len() as f64;
+    let mean = points.iter().fold(nalgebra::Vector2::zeros(), |a, p| a + p.xy()) / n;
+    let cov = points.iter().fold(nalgebra::Matrix2::zeros(), |a, p| {
+        let d = p.xy() - mean;
+        a + d * d.transpose()
+    }) / n;
+    cov.symmetric_eigenvalues().min().max(0.0).sqrt()
 }
 
 /// Calibrates a station from a session's numbers.
@@ -159,6 +174,28 @@ impl Calibration {
             .collect();
         let m = DMatrix::from_fn(keep.len(), keep.len(), |i, j| self.covariance[(keep[i], keep[j])]);
         (keep.iter().map(|&i| self.names[i].clone()).collect(), m)
+    }
+
+    /// The calibrated station's screen point for the flat reflection of
+    /// camera pixel `(i, j)` (a flat mirror at the reference plane) and its
+    /// covariance, screen px², from the calibration's covariance through
+    /// central differences. `None` where the ray does not reach the screen.
+    pub fn flat_screen_point(&self, i: u32, j: u32) -> Option<(Point2<f64>, Matrix2<f64>)> {
+        let state = State {
+            frame: self.frame,
+            station: self.station.clone(),
+        };
+        let uv = flat_reflection_uv(&self.station, i, j)?;
+        let params: Vec<Param> = self.names.iter().filter_map(|n| Param::from_name(n)).collect();
+        let mut jac = nalgebra::DMatrix::zeros(2, params.len());
+        for (k, p) in params.iter().enumerate() {
+            let h = p.step();
+            let a = flat_reflection_uv(&state.perturbed(*p, h).station, i, j)?;
+            let b = flat_reflection_uv(&state.perturbed(*p, -h).station, i, j)?;
+            jac.set_column(k, &((a - b) / (2.0 * h)));
+        }
+        let c = &jac * &self.covariance * jac.transpose();
+        Some((uv, Matrix2::new(c[(0, 0)], c[(0, 1)], c[(1, 0)], c[(1, 1)])))
     }
 
     /// Writes `station.toml`, `station_uncertainty.toml` and `report.json`

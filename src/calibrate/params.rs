@@ -105,6 +105,17 @@ impl Param {
         }
     }
 
+    /// The parameter of a report name ([`Param::name`]); `None` for a name
+    /// the adjustment does not know.
+    pub fn from_name(name: &str) -> Option<Param> {
+        match name {
+            "frame.height_mm" => Some(Param::PlaneHeight),
+            "frame.slope_x" => Some(Param::PlaneSlopeX),
+            "frame.slope_y" => Some(Param::PlaneSlopeY),
+            _ => prior(name).map(|d| Param::Station(d.name)),
+        }
+    }
+
     /// The central-difference step of its Jacobian column.
     pub fn step(&self) -> f64 {
         match self {

@@ -147,8 +147,8 @@ fn targets(truth: &Station, frame: &WorldFrame, spec: &SessionSpec, rng: &mut Xo
             // Layers interleave on the sensor (a half-cell shift per layer).
             let fx = (f64::from(k % nx) + 0.5 + 0.3 * layer as f64) / f64::from(nx);
             let fy = (f64::from(k / nx) + 0.5 + 0.2 * layer as f64) / f64::from(ny);
-            let x = f64::from(cam.width) * (0.05 + 0.9 * fx.fract());
-            let y = f64::from(cam.height) * (0.05 + 0.9 * fy.fract());
+            let x = f64::from(cam.width) * (0.02 + 0.96 * fx.fract());
+            let y = f64::from(cam.height) * (0.02 + 0.96 * fy.fract());
             let Some(world) = on_plane(truth, x, y, h) else {
                 continue;
             };
