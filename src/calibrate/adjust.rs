@@ -344,3 +344,41 @@ fn consider_covariance(n: &DMatrix<f64>, n_est: usize, held: &[Param]) -> Option
     c.view_mut((n_est, n_est), (held.len(), held.len())).copy_from(&sigma);
     Some(c)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_degenerate_pair_holds_the_one_with_the_narrow_prior() {
+        // Two parameters seen only through their sum (a pitch and a distance
+        // that scale together): the one whose prior is narrow is held, the
+        // other is then determined through it.
+        let j = DMatrix::from_row_slice(3, 3, &[1.0, 1.0, 0.0, 2.0, 2.0, 0.0, 0.0, 0.0, 1.0]);
+        let n = j.transpose() * &j;
+        let params = [
+            Param::Station("screen.z_mm"),
+            Param::Station("screen.pixel_pitch_mm"),
+            Param::Station("camera.x_mm"),
+        ];
+        let (keep, sel) = select(&n, &params);
+        assert_eq!(keep, vec![0, 2]);
+        assert_eq!(sel.held.len(), 1);
+        assert_eq!(sel.held[0].name, "screen.pixel_pitch_mm");
+        assert!(sel.condition_all.is_infinite() || sel.condition_all > 1e12);
+        assert!(sel.condition_estimated < 10.0);
+    }
+
+    #[test]
+    fn the_consider_covariance_adds_the_held_parameters_effect() {
+        // y = a + b with b held at σ_b: a's σ² is 1/N_aa + σ_b² and a, b
+        // are anticorrelated by exactly −σ_b².
+        let n = DMatrix::from_row_slice(2, 2, &[4.0, 4.0, 4.0, 4.0]);
+        let held = [Param::Station("screen.pixel_pitch_mm")];
+        let c = consider_covariance(&n, 1, &held).unwrap();
+        let s2 = 2.7e-5_f64.powi(2);
+        assert!((c[(0, 0)] - (0.25 + s2)).abs() < 1e-15);
+        assert!((c[(0, 1)] + s2).abs() < 1e-20);
+        assert!((c[(1, 1)] - s2).abs() < 1e-20);
+    }
+}

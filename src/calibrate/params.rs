@@ -286,7 +286,19 @@ pub fn perturb_station(s: &mut Station, name: &str, delta: f64) {
 /// Rotations are read off `R_to R_fromᵀ` as small world-axis angles; the
 /// screen's position is its origin after the rotation about its centre.
 pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
-    let small_angles = |r: Rotation3<f64>| r.scaled_axis().map(f64::to_degrees);
+    // The rotation vector from the antisymmetric part (`sin θ` times the
+    // axis), exact to rounding at small angles, where reading θ off the
+    // trace (`acos`) loses half the digits.
+    let small_angles = |r: Rotation3<f64>| {
+        let m = r.matrix();
+        let v = 0.5 * Vector3::new(m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)]);
+        let s = v.norm();
+        if s == 0.0 {
+            v
+        } else {
+            v * (s.min(1.0).asin().to_degrees() / s)
+        }
+    };
     let cam_w = small_angles(to.station.camera.world_from_camera * from.station.camera.world_from_camera.inverse());
     let (sf, st) = (&from.station.screen, &to.station.screen);
     let basis = |s: &crate::optics::station::Screen| {
@@ -346,4 +358,69 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
             },
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state() -> State {
+        let station = crate::sim::session::example_truth().unwrap();
+        State {
+            frame: WorldFrame {
+                plane: [12.3, 0.004, -0.003],
+                center_stage_mm: [102.4, 87.9],
+            },
+            station,
+        }
+    }
+
+    #[test]
+    fn the_world_frame_follows_the_spec() {
+        let f = state().frame;
+        let r = f.stage_from_world();
+        let (x, z) = (r * Vector3::x(), r * Vector3::z());
+        // z: the plane's normal on the stage's +z side; x: the stage's x in the plane.
+        assert!((z - Vector3::new(-0.004, 0.003, 1.0).normalize()).norm() < 1e-15);
+        assert!(x.dot(&z).abs() < 1e-15 && x.dot(&z.cross(&Vector3::x())).abs() < 1e-15 && x.x > 0.0);
+        // The origin is the plane's point at the element's centre.
+        let o = f.to_world(&Vector3::new(102.4, 87.9, 12.3));
+        assert!(o.coords.norm() < 1e-12);
+        let p = Point3::new(10.0, -20.0, 300.0);
+        assert!((f.to_world(&f.to_stage(&p)) - p).norm() < 1e-12);
+        // A point of the plane is at world z = 0.
+        let s = Vector3::new(150.0, 40.0, 12.3 + 0.004 * 47.6 + 0.003 * 47.9);
+        assert!(f.to_world(&s).z.abs() < 1e-12);
+    }
+
+    #[test]
+    fn difference_reads_back_every_change() {
+        let from = state();
+        let params: Vec<Param> = [Param::PlaneHeight, Param::PlaneSlopeX, Param::PlaneSlopeY]
+            .into_iter()
+            .chain(STATION_DOFS.iter().map(|d| Param::Station(d.name)))
+            .collect();
+        for (k, p) in params.iter().enumerate() {
+            // A change of ten difference steps: small, far above rounding.
+            let delta = 10.0 * p.step();
+            let d = difference(&from, &from.perturbed(*p, delta), &params);
+            for (m, v) in d.iter().enumerate() {
+                let want = if m == k { delta } else { 0.0 };
+                assert!((v - want).abs() < 1e-9 * delta.abs().max(1e-3), "{} → {}: {v}", p.name(), params[m].name());
+            }
+        }
+    }
+
+    #[test]
+    fn the_screen_turns_about_its_centre_and_keeps_it_under_a_pitch_change() {
+        let s = state().station;
+        let q = s.screen.centre();
+        for name in ["screen.rx_deg", "screen.pixel_pitch_mm"] {
+            let mut t = s.clone();
+            perturb_station(&mut t, name, 0.01);
+            assert!((t.screen.centre() - q).norm() < 1e-9, "{name}");
+        }
+        assert!(Param::from_name("camera.k3") == Some(Param::Station("camera.k3")));
+        assert!(Param::from_name("camera.k4").is_none());
+    }
 }

@@ -210,3 +210,31 @@ fn coplanar(pts: &[Point3<f64>]) -> bool {
         / n;
     cov.symmetric_eigenvalues().min().max(0.0).sqrt() < 1e-3
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dlt_recovers_an_exact_pinhole() {
+        let mut station = crate::sim::session::example_truth().unwrap();
+        station.camera.distortion = None;
+        let cam = &station.camera;
+        let world: Vec<Point3<f64>> = (0..24)
+            .map(|k| {
+                let f = f64::from(k);
+                Point3::new(-90.0 + 8.0 * f, 60.0 * (0.7 * f).sin(), 40.0 * f64::from(k % 3))
+            })
+            .collect();
+        let pixels: Vec<Point2<f64>> = world.iter().map(|p| cam.project(p).unwrap()).collect();
+        let p = dlt(&world, &pixels).unwrap();
+        let (c, r, f_px, pp) = decompose(&p, &world).unwrap();
+        // Noise-free: the DLT is exact to rounding of a 12×12 eigenproblem.
+        assert!((c - cam.position_mm).norm() < 1e-6, "{c} vs {}", cam.position_mm);
+        assert!((r.matrix() - cam.world_from_camera.matrix()).norm() < 1e-9);
+        assert!((f_px - cam.focal_px()).abs() < 1e-6);
+        assert!((pp - cam.principal_point_px).norm() < 1e-6);
+        assert!(coplanar(&world[..0].iter().chain(&[Point3::origin(); 3]).copied().collect::<Vec<_>>()));
+        assert!(!coplanar(&world));
+    }
+}
