@@ -8,7 +8,9 @@ use mfd::calibrate::calibration::{calibrate, Calibration};
 use mfd::calibrate::error::CalibrationError;
 use mfd::calibrate::params::{difference, Param, State};
 use mfd::optics::station::Station;
-use mfd::sim::session::{example_truth, flat_truth, simulate_session, SessionSpec, SimulatedSession};
+use mfd::sim::session::{
+    example_truth, flat_truth, simulate_session, SessionSpec, SimulatedSession,
+};
 use nalgebra::{DMatrix, DVector};
 
 fn session(seed: u64, spec: SessionSpec) -> SimulatedSession {
@@ -19,7 +21,11 @@ fn session(seed: u64, spec: SessionSpec) -> SimulatedSession {
 /// `(estimate − truth)ᵀ C⁻¹ (estimate − truth)` over every parameter the
 /// calibration reports, and their number.
 fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize) {
-    let params: Vec<Param> = cal.names.iter().map(|n| Param::from_name(n).unwrap()).collect();
+    let params: Vec<Param> = cal
+        .names
+        .iter()
+        .map(|n| Param::from_name(n).unwrap())
+        .collect();
     let truth = State {
         frame: sim.frame,
         station: sim.truth.clone(),
@@ -30,7 +36,10 @@ fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize) {
     };
     let e = DVector::from_vec(difference(&truth, &est, &params));
     let c: &DMatrix<f64> = &cal.covariance;
-    let chol = c.clone().cholesky().expect("the reported covariance is positive definite");
+    let chol = c
+        .clone()
+        .cholesky()
+        .expect("the reported covariance is positive definite");
     (e.dot(&chol.solve(&e)), params.len())
 }
 
@@ -54,7 +63,10 @@ fn errors_follow_the_reported_covariance_over_many_seeds() {
     let mean = sum / seeds as f64;
     let tol = 4.0 * (2.0 * k as f64 / seeds as f64).sqrt();
     println!("mean χ² {mean:.2} over {seeds} seeds, {k} parameters (tolerance ±{tol:.2})");
-    assert!((mean - k as f64).abs() < tol, "mean χ² {mean} against {k} ± {tol}");
+    assert!(
+        (mean - k as f64).abs() < tol,
+        "mean χ² {mean} against {k} ± {tol}"
+    );
 }
 
 #[test]
@@ -81,7 +93,9 @@ fn flat_screen_points_match_the_truth_over_the_sensor() {
                 let Some((t, hit)) = flat_truth(truth, i, j) else {
                     continue;
                 };
-                let (e, c) = cal.flat_screen_point(i, j).expect("the calibrated ray reaches the screen");
+                let (e, c) = cal
+                    .flat_screen_point(i, j)
+                    .expect("the calibrated ray reaches the screen");
                 let d = e - t;
                 if hit.coords.xy().norm() <= flat_radius_mm {
                     worst_on_flat = worst_on_flat.max(d.norm());
@@ -102,12 +116,20 @@ fn flat_screen_points_match_the_truth_over_the_sensor() {
          mean eᵀC⁻¹e {mean:.3} over {seeds} seeds"
     );
     assert!(worst_on_flat < 0.05, "{worst_on_flat} screen px");
-    assert!((mean - 2.0).abs() < 4.0 * 2.0 / (seeds as f64).sqrt(), "{mean}");
+    assert!(
+        (mean - 2.0).abs() < 4.0 * 2.0 / (seeds as f64).sqrt(),
+        "{mean}"
+    );
 }
 
 fn held(cal: &Calibration) -> Vec<String> {
     let joint = cal.report.steps.iter().find(|s| s.name == "joint").unwrap();
-    joint.selection.held.iter().map(|h| h.name.clone()).collect()
+    joint
+        .selection
+        .held
+        .iter()
+        .map(|h| h.name.clone())
+        .collect()
 }
 
 #[test]
@@ -120,7 +142,10 @@ fn what_the_data_cannot_determine_is_held_and_reported() {
     // where a screen scaled about it looks the same (only the cover glass
     // breaks that, far below the pitch's datasheet precision).
     for name in ["element.x_mm", "element.y_mm", "screen.pixel_pitch_mm"] {
-        assert!(held.contains(&name.to_string()), "{name} not held: {held:?}");
+        assert!(
+            held.contains(&name.to_string()),
+            "{name} not held: {held:?}"
+        );
     }
     // k3 moves a corner of this sensor (r² ≈ 0.036) by k3 r⁷ F ≈ 0.04 px
     // per unit: below the 0.05 px centroids at the 0.5 prior range.
@@ -131,12 +156,20 @@ fn what_the_data_cannot_determine_is_held_and_reported() {
     // Estimated parameters are not held.
     let joint = cal.report.steps.iter().find(|s| s.name == "joint").unwrap();
     assert!(joint.selection.estimated.contains(&"camera.k1".to_string()));
-    assert!(joint.selection.estimated.contains(&"element.rx_deg".to_string()));
+    assert!(joint
+        .selection
+        .estimated
+        .contains(&"element.rx_deg".to_string()));
     for step in &cal.report.steps {
         // χ²/dof of a correct model with the stated noise: 1 ± √(2/dof),
         // dof ≥ 100 here; five of those σ bound it.
         let tol = 5.0 * (2.0 / step.dof as f64).sqrt();
-        assert!((step.chi2_per_dof - 1.0).abs() < tol, "{}: {}", step.name, step.chi2_per_dof);
+        assert!(
+            (step.chi2_per_dof - 1.0).abs() < tol,
+            "{}: {}",
+            step.name,
+            step.chi2_per_dof
+        );
     }
 }
 
@@ -156,7 +189,11 @@ fn without_element_points_the_pose_is_held_and_said_so() {
     for name in ["element.z_mm", "element.rx_deg", "element.ry_deg"] {
         assert!(held.contains(&name.to_string()), "{name}: {held:?}");
     }
-    assert!(cal.report.notes.iter().any(|n| n.contains("no element points")));
+    assert!(cal
+        .report
+        .notes
+        .iter()
+        .any(|n| n.contains("no element points")));
 }
 
 #[test]
@@ -166,7 +203,11 @@ fn bad_sessions_name_the_entry() {
     few.flat_points_stage_mm.truncate(2);
     assert!(matches!(
         calibrate(&few),
-        Err(CalibrationError::TooFew { entry: "flat_point", found: 2, .. })
+        Err(CalibrationError::TooFew {
+            entry: "flat_point",
+            found: 2,
+            ..
+        })
     ));
     let mut line = sim.input.clone();
     for (k, p) in line.flat_points_stage_mm.iter_mut().enumerate() {
@@ -174,20 +215,36 @@ fn bad_sessions_name_the_entry() {
     }
     assert!(matches!(
         calibrate(&line),
-        Err(CalibrationError::Degenerate { entry: "flat_point", .. })
+        Err(CalibrationError::Degenerate {
+            entry: "flat_point",
+            ..
+        })
     ));
     let mut flat_targets = sim.input.clone();
     for t in &mut flat_targets.targets {
         t.stage_mm.z = sim.input.targets[0].stage_mm.z;
     }
     let err = calibrate(&flat_targets).unwrap_err();
-    assert!(matches!(err, CalibrationError::Degenerate { entry: "target_point", .. }), "{err}");
+    assert!(
+        matches!(
+            err,
+            CalibrationError::Degenerate {
+                entry: "target_point",
+                ..
+            }
+        ),
+        "{err}"
+    );
     assert!(err.to_string().contains("two or more heights"));
     let mut five = sim.input.clone();
     five.targets.truncate(5);
     assert!(matches!(
         calibrate(&five),
-        Err(CalibrationError::TooFew { entry: "target_point", found: 5, needed: 6 })
+        Err(CalibrationError::TooFew {
+            entry: "target_point",
+            found: 5,
+            needed: 6
+        })
     ));
 }
 
@@ -201,14 +258,22 @@ fn a_calibration_writes_the_three_files() {
     assert_eq!(station, cal.station);
     let text = std::fs::read_to_string(dir.path().join("station.toml")).unwrap();
     assert!(text.contains("mfd-station/2"));
-    let unc: toml::Value =
-        toml::from_str(&std::fs::read_to_string(dir.path().join("station_uncertainty.toml")).unwrap()).unwrap();
+    let unc: toml::Value = toml::from_str(
+        &std::fs::read_to_string(dir.path().join("station_uncertainty.toml")).unwrap(),
+    )
+    .unwrap();
     assert_eq!(unc["format"].as_str(), Some("mfd-station-uncertainty/1"));
     let names = unc["covariance"]["names"].as_array().unwrap();
-    assert!(names.iter().all(|n| !n.as_str().unwrap().starts_with("frame.")));
-    assert_eq!(unc["covariance"]["matrix"].as_array().unwrap().len(), names.len());
+    assert!(names
+        .iter()
+        .all(|n| !n.as_str().unwrap().starts_with("frame.")));
+    assert_eq!(
+        unc["covariance"]["matrix"].as_array().unwrap().len(),
+        names.len()
+    );
     assert!(unc["std"]["element.thickness_mm"].as_float().unwrap() > 0.0);
     let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
+            .unwrap();
     assert_eq!(report["steps"].as_array().unwrap().len(), 3);
 }

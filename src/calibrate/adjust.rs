@@ -88,15 +88,29 @@ impl LeastSquares for Problem<'_> {
         let mut j = DMatrix::zeros(r.len(), self.params.len());
         for (k, param) in self.params.iter().enumerate() {
             let h = param.step();
-            let plus = whitened(self.input, &p.perturbed(*param, h), self.blocks, self.whitening);
-            let minus = whitened(self.input, &p.perturbed(*param, -h), self.blocks, self.whitening);
+            let plus = whitened(
+                self.input,
+                &p.perturbed(*param, h),
+                self.blocks,
+                self.whitening,
+            );
+            let minus = whitened(
+                self.input,
+                &p.perturbed(*param, -h),
+                self.blocks,
+                self.whitening,
+            );
             for (row, (a, b)) in plus.iter().zip(&minus).enumerate() {
                 j[(row, k)] = (a - b) / (2.0 * h);
             }
         }
         let cost = r.norm_squared();
         Normal {
-            cost: if cost.is_finite() { cost } else { f64::INFINITY },
+            cost: if cost.is_finite() {
+                cost
+            } else {
+                f64::INFINITY
+            },
             jtj: j.transpose() * &j,
             jtr: -(j.transpose() * &r),
             residuals: r.len(),
@@ -156,7 +170,7 @@ pub struct Selection {
 fn condition(n: &DMatrix<f64>) -> f64 {
     let dim = n.nrows();
     let d: Vec<f64> = (0..dim).map(|i| n[(i, i)].max(0.0).sqrt()).collect();
-    if d.iter().any(|&x| x == 0.0) {
+    if d.contains(&0.0) {
         return f64::INFINITY;
     }
     let c = DMatrix::from_fn(dim, dim, |i, j| n[(i, j)] / (d[i] * d[j]));
@@ -181,7 +195,9 @@ fn posterior_std(n: &DMatrix<f64>, priors: &[Option<f64>]) -> Option<Vec<f64>> {
             m[(i, i)] += 1.0 / (p * p);
         }
     }
-    let d: Vec<f64> = (0..dim).map(|i| m[(i, i)].max(f64::MIN_POSITIVE).sqrt()).collect();
+    let d: Vec<f64> = (0..dim)
+        .map(|i| m[(i, i)].max(f64::MIN_POSITIVE).sqrt())
+        .collect();
     let c = DMatrix::from_fn(dim, dim, |i, j| m[(i, j)] / (d[i] * d[j]));
     let inv = c.cholesky()?.inverse();
     Some((0..dim).map(|i| inv[(i, i)].sqrt() / d[i]).collect())
@@ -206,7 +222,8 @@ pub fn select(n: &DMatrix<f64>, params: &[Param]) -> (Vec<usize>, Selection) {
         let sub = submatrix(n, &active, &active);
         let cond = condition(&sub);
         let priors: Vec<Option<f64>> = active.iter().map(|&i| params[i].prior_std()).collect();
-        let sigma = posterior_std(&sub, &priors).unwrap_or_else(|| vec![f64::INFINITY; active.len()]);
+        let sigma =
+            posterior_std(&sub, &priors).unwrap_or_else(|| vec![f64::INFINITY; active.len()]);
         let worst = active
             .iter()
             .enumerate()
@@ -215,7 +232,10 @@ pub fn select(n: &DMatrix<f64>, params: &[Param]) -> (Vec<usize>, Selection) {
         match worst {
             Some((k, s, p)) if s > HOLD_RATIO * p => {
                 let i = active.remove(k);
-                log::info!("calibration: holding {} (σ {s:.3e} against prior {p:.3e})", params[i].name());
+                log::info!(
+                    "calibration: holding {} (σ {s:.3e} against prior {p:.3e})",
+                    params[i].name()
+                );
                 held.push(Held {
                     name: params[i].name().to_string(),
                     marginal_std: s,
@@ -225,7 +245,10 @@ pub fn select(n: &DMatrix<f64>, params: &[Param]) -> (Vec<usize>, Selection) {
             }
             _ => {
                 let selection = Selection {
-                    estimated: active.iter().map(|&i| params[i].name().to_string()).collect(),
+                    estimated: active
+                        .iter()
+                        .map(|&i| params[i].name().to_string())
+                        .collect(),
                     held,
                     condition_all,
                     condition_estimated: cond,
@@ -305,12 +328,13 @@ pub fn adjust(
         ..problem
     }
     .evaluate(&out.params);
-    let covariance = consider_covariance(full.jtj(), estimated.len(), &held)
-        .ok_or_else(|| CalibrationError::NotConverged {
+    let covariance = consider_covariance(full.jtj(), estimated.len(), &held).ok_or_else(|| {
+        CalibrationError::NotConverged {
             step,
             trials: out.trials,
             stop: "the normal matrix of the estimated parameters is singular".into(),
-        })?;
+        }
+    })?;
     Ok(Adjusted {
         state: out.params,
         selection,
@@ -339,9 +363,12 @@ fn consider_covariance(n: &DMatrix<f64>, n_est: usize, held: &[Param]) -> Option
     let cov_eh = -(&s * &sigma);
     let mut c = DMatrix::zeros(total, total);
     c.view_mut((0, 0), (n_est, n_est)).copy_from(&cov_ee);
-    c.view_mut((0, n_est), (n_est, held.len())).copy_from(&cov_eh);
-    c.view_mut((n_est, 0), (held.len(), n_est)).copy_from(&cov_eh.transpose());
-    c.view_mut((n_est, n_est), (held.len(), held.len())).copy_from(&sigma);
+    c.view_mut((0, n_est), (n_est, held.len()))
+        .copy_from(&cov_eh);
+    c.view_mut((n_est, 0), (held.len(), n_est))
+        .copy_from(&cov_eh.transpose());
+    c.view_mut((n_est, n_est), (held.len(), held.len()))
+        .copy_from(&sigma);
     Some(c)
 }
 

@@ -94,7 +94,10 @@ fn check_points(input: &CalibrationInput) -> Result<WorldFrame, CalibrationError
 /// The smallest principal standard deviation of the points' x, y, mm.
 fn smallest_spread_xy(points: &[Vector3<f64>]) -> f64 {
     let n = points.len() as f64;
-    let mean = points.iter().fold(nalgebra::Vector2::zeros(), |a, p| a + p.xy()) / n;
+    let mean = points
+        .iter()
+        .fold(nalgebra::Vector2::zeros(), |a, p| a + p.xy())
+        / n;
     let cov = points.iter().fold(nalgebra::Matrix2::zeros(), |a, p| {
         let d = p.xy() - mean;
         a + d * d.transpose()
@@ -122,7 +125,13 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         flat_map: true,
     };
     let screen_params: Vec<Param> = dofs_of("screen.");
-    let screen = adjust(input, camera.state.clone(), &screen_params, screen_blocks, "screen")?;
+    let screen = adjust(
+        input,
+        camera.state.clone(),
+        &screen_params,
+        screen_blocks,
+        "screen",
+    )?;
     let mut all = vec![Param::PlaneHeight, Param::PlaneSlopeX, Param::PlaneSlopeY];
     all.extend(STATION_DOFS.iter().map(|d| Param::Station(d.name)));
     let joint = adjust(input, screen.state.clone(), &all, Blocks::ALL, "joint")?;
@@ -172,7 +181,9 @@ impl Calibration {
         let keep: Vec<usize> = (0..self.names.len())
             .filter(|&i| !self.names[i].starts_with("frame."))
             .collect();
-        let m = DMatrix::from_fn(keep.len(), keep.len(), |i, j| self.covariance[(keep[i], keep[j])]);
+        let m = DMatrix::from_fn(keep.len(), keep.len(), |i, j| {
+            self.covariance[(keep[i], keep[j])]
+        });
         (keep.iter().map(|&i| self.names[i].clone()).collect(), m)
     }
 
@@ -186,7 +197,11 @@ impl Calibration {
             station: self.station.clone(),
         };
         let uv = flat_reflection_uv(&self.station, i, j)?;
-        let params: Vec<Param> = self.names.iter().filter_map(|n| Param::from_name(n)).collect();
+        let params: Vec<Param> = self
+            .names
+            .iter()
+            .filter_map(|n| Param::from_name(n))
+            .collect();
         let mut jac = nalgebra::DMatrix::zeros(2, params.len());
         for (k, p) in params.iter().enumerate() {
             let h = p.step();
@@ -223,7 +238,11 @@ impl Calibration {
     pub fn uncertainty_toml(&self, station_file: &str) -> String {
         let (names, m) = self.station_covariance();
         let matrix: Vec<Vec<f64>> = (0..m.nrows())
-            .map(|i| (0..m.ncols()).map(|j| 0.5 * (m[(i, j)] + m[(j, i)])).collect())
+            .map(|i| {
+                (0..m.ncols())
+                    .map(|j| 0.5 * (m[(i, j)] + m[(j, i)]))
+                    .collect()
+            })
             .collect();
         let file = super::report::UncertaintyFile {
             format: "mfd-station-uncertainty/1".into(),

@@ -47,7 +47,9 @@ pub enum CalibrationError {
     },
     /// The calibrated station is not a valid station (e.g. a distortion
     /// whose inverse is not unique over the sensor).
-    #[error("the calibrated station is not valid: {source}; check the targets' spread over the sensor")]
+    #[error(
+        "the calibrated station is not valid: {source}; check the targets' spread over the sensor"
+    )]
     InvalidResult {
         /// The station's own error, naming the field.
         #[source]

@@ -7,12 +7,12 @@
 //! It sits above the solvers: the reference flat's screen points come from
 //! the spectral stage.
 
-pub mod session_file;
 pub mod adjust;
+pub mod calibration;
 pub mod error;
 pub mod input;
 pub mod params;
-pub mod residuals;
-pub mod resect;
-pub mod calibration;
 pub mod report;
+pub mod resect;
+pub mod residuals;
+pub mod session_file;

@@ -267,10 +267,9 @@ pub fn perturb_station(s: &mut Station, name: &str, delta: f64) {
             let q = s.screen.centre();
             s.screen.pixel_pitch_mm += delta;
             let half = 0.5 * s.screen.pixel_pitch_mm;
-            s.screen.origin_mm = q
-                - half
-                    * (f64::from(s.screen.width) * s.screen.u_axis.as_ref()
-                        + f64::from(s.screen.height) * s.screen.v_axis.as_ref());
+            s.screen.origin_mm = q - half
+                * (f64::from(s.screen.width) * s.screen.u_axis.as_ref()
+                    + f64::from(s.screen.height) * s.screen.v_axis.as_ref());
         }
         ("element", "x_mm" | "y_mm" | "z_mm") => s.element.pose.offset_mm[axis(first)] += delta,
         ("element", "rx_deg") => s.element.pose.tilt_deg[0] += delta,
@@ -291,7 +290,12 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
     // trace (`acos`) loses half the digits.
     let small_angles = |r: Rotation3<f64>| {
         let m = r.matrix();
-        let v = 0.5 * Vector3::new(m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)]);
+        let v = 0.5
+            * Vector3::new(
+                m[(2, 1)] - m[(1, 2)],
+                m[(0, 2)] - m[(2, 0)],
+                m[(1, 0)] - m[(0, 1)],
+            );
         let s = v.norm();
         if s == 0.0 {
             v
@@ -299,10 +303,16 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
             v * (s.min(1.0).asin().to_degrees() / s)
         }
     };
-    let cam_w = small_angles(to.station.camera.world_from_camera * from.station.camera.world_from_camera.inverse());
+    let cam_w = small_angles(
+        to.station.camera.world_from_camera * from.station.camera.world_from_camera.inverse(),
+    );
     let (sf, st) = (&from.station.screen, &to.station.screen);
     let basis = |s: &crate::optics::station::Screen| {
-        nalgebra::Matrix3::from_columns(&[s.u_axis.into_inner(), s.v_axis.into_inner(), s.normal().into_inner()])
+        nalgebra::Matrix3::from_columns(&[
+            s.u_axis.into_inner(),
+            s.v_axis.into_inner(),
+            s.normal().into_inner(),
+        ])
     };
     let scr_r = Rotation3::from_matrix(&(basis(st) * basis(sf).transpose()));
     let scr_w = small_angles(scr_r);
@@ -324,15 +334,29 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
             Param::PlaneSlopeX => to.frame.plane[1] - from.frame.plane[1],
             Param::PlaneSlopeY => to.frame.plane[2] - from.frame.plane[2],
             Param::Station(n) => match *n {
-                "camera.x_mm" => to.station.camera.position_mm.x - from.station.camera.position_mm.x,
-                "camera.y_mm" => to.station.camera.position_mm.y - from.station.camera.position_mm.y,
-                "camera.z_mm" => to.station.camera.position_mm.z - from.station.camera.position_mm.z,
+                "camera.x_mm" => {
+                    to.station.camera.position_mm.x - from.station.camera.position_mm.x
+                }
+                "camera.y_mm" => {
+                    to.station.camera.position_mm.y - from.station.camera.position_mm.y
+                }
+                "camera.z_mm" => {
+                    to.station.camera.position_mm.z - from.station.camera.position_mm.z
+                }
                 "camera.rx_deg" => cam_w.x,
                 "camera.ry_deg" => cam_w.y,
                 "camera.rz_deg" => cam_w.z,
-                "camera.focal_length_mm" => to.station.camera.focal_length_mm - from.station.camera.focal_length_mm,
-                "camera.cx_px" => to.station.camera.principal_point_px.x - from.station.camera.principal_point_px.x,
-                "camera.cy_px" => to.station.camera.principal_point_px.y - from.station.camera.principal_point_px.y,
+                "camera.focal_length_mm" => {
+                    to.station.camera.focal_length_mm - from.station.camera.focal_length_mm
+                }
+                "camera.cx_px" => {
+                    to.station.camera.principal_point_px.x
+                        - from.station.camera.principal_point_px.x
+                }
+                "camera.cy_px" => {
+                    to.station.camera.principal_point_px.y
+                        - from.station.camera.principal_point_px.y
+                }
                 "camera.k1" => dk[0],
                 "camera.k2" => dk[1],
                 "camera.k3" => dk[2],
@@ -350,7 +374,9 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
                 "element.z_mm" => et.offset_mm.z - ef.offset_mm.z,
                 "element.rx_deg" => et.tilt_deg[0] - ef.tilt_deg[0],
                 "element.ry_deg" => et.tilt_deg[1] - ef.tilt_deg[1],
-                "element.thickness_mm" => to.station.element.thickness_mm - from.station.element.thickness_mm,
+                "element.thickness_mm" => {
+                    to.station.element.thickness_mm - from.station.element.thickness_mm
+                }
                 "element.refractive_index" => {
                     to.station.element.refractive_index - from.station.element.refractive_index
                 }
@@ -382,7 +408,9 @@ mod tests {
         let (x, z) = (r * Vector3::x(), r * Vector3::z());
         // z: the plane's normal on the stage's +z side; x: the stage's x in the plane.
         assert!((z - Vector3::new(-0.004, 0.003, 1.0).normalize()).norm() < 1e-15);
-        assert!(x.dot(&z).abs() < 1e-15 && x.dot(&z.cross(&Vector3::x())).abs() < 1e-15 && x.x > 0.0);
+        assert!(
+            x.dot(&z).abs() < 1e-15 && x.dot(&z.cross(&Vector3::x())).abs() < 1e-15 && x.x > 0.0
+        );
         // The origin is the plane's point at the element's centre.
         let o = f.to_world(&Vector3::new(102.4, 87.9, 12.3));
         assert!(o.coords.norm() < 1e-12);
@@ -406,7 +434,12 @@ mod tests {
             let d = difference(&from, &from.perturbed(*p, delta), &params);
             for (m, v) in d.iter().enumerate() {
                 let want = if m == k { delta } else { 0.0 };
-                assert!((v - want).abs() < 1e-9 * delta.abs().max(1e-3), "{} → {}: {v}", p.name(), params[m].name());
+                assert!(
+                    (v - want).abs() < 1e-9 * delta.abs().max(1e-3),
+                    "{} → {}: {v}",
+                    p.name(),
+                    params[m].name()
+                );
             }
         }
     }

@@ -66,7 +66,12 @@ fn rms(values: impl Iterator<Item = f64>) -> (f64, usize) {
     (if n > 0 { (s / n as f64).sqrt() } else { 0.0 }, n)
 }
 
-fn block_2d(name: &'static str, unit: &'static str, e: &[nalgebra::Vector2<f64>], w: &[Matrix2<f64>]) -> BlockReport {
+fn block_2d(
+    name: &'static str,
+    unit: &'static str,
+    e: &[nalgebra::Vector2<f64>],
+    w: &[Matrix2<f64>],
+) -> BlockReport {
     let (r, _) = rms(e.iter().flat_map(|v| [v.x, v.y]));
     let var: f64 = w
         .iter()
@@ -131,7 +136,10 @@ impl Report {
     pub fn new(input: &CalibrationInput, steps: Vec<StepReport>) -> Self {
         let mut notes = vec![format!(
             "element thickness {} ± {} mm and index {} ± {} taken from the session as given",
-            input.thickness_mm.0, input.thickness_mm.1, input.refractive_index.0, input.refractive_index.1
+            input.thickness_mm.0,
+            input.thickness_mm.1,
+            input.refractive_index.0,
+            input.refractive_index.1
         )];
         if input.element_points_stage_mm.is_empty() {
             notes.push(
@@ -161,7 +169,11 @@ impl Report {
         for step in &self.steps {
             s += &format!(
                 "{:<10} χ²/dof {:.2} ({} dof, {} trials, condition {:.1e})\n",
-                step.name, step.chi2_per_dof, step.dof, step.trials, step.selection.condition_estimated
+                step.name,
+                step.chi2_per_dof,
+                step.dof,
+                step.trials,
+                step.selection.condition_estimated
             );
             for b in &step.blocks {
                 s += &format!(

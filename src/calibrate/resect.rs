@@ -83,9 +83,22 @@ pub fn dlt(world: &[Point3<f64>], pixels: &[Point2<f64>]) -> Option<Matrix3x4<f6
     t_x.try_inverse().map(|ti| ti * pn * t_w)
 }
 
+/// A pinhole read off a projection matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearCamera {
+    /// Projection centre, world frame, mm.
+    pub position_mm: Point3<f64>,
+    /// Camera-to-world rotation.
+    pub world_from_camera: Rotation3<f64>,
+    /// Focal length, px (the mean of the two axes').
+    pub focal_px: f64,
+    /// Principal point, px (pixel-centre convention, as the pixels given).
+    pub principal_point_px: Point2<f64>,
+}
+
 /// Position, rotation, focal length (px) and principal point of a
 /// projection matrix (RQ of its left 3×3), with the points in front.
-pub fn decompose(p: &Matrix3x4<f64>, world: &[Point3<f64>]) -> Option<(Point3<f64>, Rotation3<f64>, f64, Point2<f64>)> {
+pub fn decompose(p: &Matrix3x4<f64>, world: &[Point3<f64>]) -> Option<LinearCamera> {
     let mut p = *p;
     let m: Matrix3<f64> = p.fixed_view::<3, 3>(0, 0).into();
     let centre = -(m.try_inverse()? * p.column(3));
@@ -109,23 +122,32 @@ pub fn decompose(p: &Matrix3x4<f64>, world: &[Point3<f64>]) -> Option<(Point3<f6
     k /= k[(2, 2)];
     let f = 0.5 * (k[(0, 0)] + k[(1, 1)]);
     let camera_from_world = Rotation3::from_matrix(&rot);
-    Some((Point3::from(centre), camera_from_world.inverse(), f, Point2::new(k[(0, 2)], k[(1, 2)])))
+    Some(LinearCamera {
+        position_mm: Point3::from(centre),
+        world_from_camera: camera_from_world.inverse(),
+        focal_px: f,
+        principal_point_px: Point2::new(k[(0, 2)], k[(1, 2)]),
+    })
 }
 
 /// The DLT camera from the targets at `state`'s world frame, with the
 /// nominal's sensor and distortion (the values a held coefficient keeps);
 /// `None` where the DLT fails.
 pub fn linear_start(input: &CalibrationInput, state: &State) -> Option<Camera> {
-    let world: Vec<Point3<f64>> = input.targets.iter().map(|t| state.frame.to_world(&t.stage_mm)).collect();
+    let world: Vec<Point3<f64>> = input
+        .targets
+        .iter()
+        .map(|t| state.frame.to_world(&t.stage_mm))
+        .collect();
     let pixels: Vec<Point2<f64>> = input.targets.iter().map(|t| t.pixel).collect();
     let p = dlt(&world, &pixels)?;
-    let (c, r, f_px, pp) = decompose(&p, &world)?;
+    let lin = decompose(&p, &world)?;
     let nominal = &state.station.camera;
     let cam = Camera {
-        position_mm: c,
-        world_from_camera: r,
-        focal_length_mm: f_px * nominal.pixel_pitch_mm,
-        principal_point_px: pp,
+        position_mm: lin.position_mm,
+        world_from_camera: lin.world_from_camera,
+        focal_length_mm: lin.focal_px * nominal.pixel_pitch_mm,
+        principal_point_px: lin.principal_point_px,
         distortion: Some(nominal.distortion.unwrap_or(Distortion {
             k: [0.0; 3],
             p: [0.0; 2],
@@ -151,7 +173,11 @@ pub fn resect(input: &CalibrationInput, state: &State) -> Result<Adjusted, Calib
             needed: MIN_TARGETS,
         });
     }
-    let world: Vec<Point3<f64>> = input.targets.iter().map(|t| state.frame.to_world(&t.stage_mm)).collect();
+    let world: Vec<Point3<f64>> = input
+        .targets
+        .iter()
+        .map(|t| state.frame.to_world(&t.stage_mm))
+        .collect();
     if coplanar(&world) {
         return Err(CalibrationError::Degenerate {
             entry: "target_point",
@@ -204,10 +230,9 @@ fn reprojection_ss(input: &CalibrationInput, state: &State) -> f64 {
 fn coplanar(pts: &[Point3<f64>]) -> bool {
     let n = pts.len() as f64;
     let mean = pts.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
-    let cov = pts
-        .iter()
-        .fold(Matrix3::zeros(), |a, p| a + (p.coords - mean) * (p.coords - mean).transpose())
-        / n;
+    let cov = pts.iter().fold(Matrix3::zeros(), |a, p| {
+        a + (p.coords - mean) * (p.coords - mean).transpose()
+    }) / n;
     cov.symmetric_eigenvalues().min().max(0.0).sqrt() < 1e-3
 }
 
@@ -223,18 +248,34 @@ mod tests {
         let world: Vec<Point3<f64>> = (0..24)
             .map(|k| {
                 let f = f64::from(k);
-                Point3::new(-90.0 + 8.0 * f, 60.0 * (0.7 * f).sin(), 40.0 * f64::from(k % 3))
+                Point3::new(
+                    -90.0 + 8.0 * f,
+                    60.0 * (0.7 * f).sin(),
+                    40.0 * f64::from(k % 3),
+                )
             })
             .collect();
         let pixels: Vec<Point2<f64>> = world.iter().map(|p| cam.project(p).unwrap()).collect();
         let p = dlt(&world, &pixels).unwrap();
-        let (c, r, f_px, pp) = decompose(&p, &world).unwrap();
+        let lin = decompose(&p, &world).unwrap();
+        let (c, r, f_px, pp) = (
+            lin.position_mm,
+            lin.world_from_camera,
+            lin.focal_px,
+            lin.principal_point_px,
+        );
         // Noise-free: the DLT is exact to rounding of a 12×12 eigenproblem.
-        assert!((c - cam.position_mm).norm() < 1e-6, "{c} vs {}", cam.position_mm);
+        assert!(
+            (c - cam.position_mm).norm() < 1e-6,
+            "{c} vs {}",
+            cam.position_mm
+        );
         assert!((r.matrix() - cam.world_from_camera.matrix()).norm() < 1e-9);
         assert!((f_px - cam.focal_px()).abs() < 1e-6);
         assert!((pp - cam.principal_point_px).norm() < 1e-6);
-        assert!(coplanar(&world[..0].iter().chain(&[Point3::origin(); 3]).copied().collect::<Vec<_>>()));
+        let in_a_plane: Vec<Point3<f64>> =
+            world.iter().map(|p| Point3::new(p.x, p.y, 5.0)).collect();
+        assert!(coplanar(&in_a_plane));
         assert!(!coplanar(&world));
     }
 }

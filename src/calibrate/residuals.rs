@@ -116,7 +116,7 @@ pub fn flat_reflection_uv(station: &Station, i: u32, j: u32) -> Option<Point2<f6
             let n = screen.normal();
             let denom = r.dot(&n);
             let s = (screen.origin_mm - hit).dot(&n) / denom;
-            if !(s > 0.0) {
+            if s.is_nan() || s <= 0.0 {
                 return None;
             }
             hit + s * r.as_ref()
@@ -187,7 +187,12 @@ pub fn raw(input: &CalibrationInput, state: &State, blocks: Blocks) -> Raw {
 
 /// The whitened residuals of the blocks asked for, in the order flat
 /// points, element points, targets, flat map.
-pub fn whitened(input: &CalibrationInput, state: &State, blocks: Blocks, w: &Whitening) -> Vec<f64> {
+pub fn whitened(
+    input: &CalibrationInput,
+    state: &State,
+    blocks: Blocks,
+    w: &Whitening,
+) -> Vec<f64> {
     let r = raw(input, state, blocks);
     let s = input.stage_std_mm;
     let mut out = Vec::with_capacity(

@@ -138,7 +138,12 @@ pub fn flat_truth(station: &Station, i: u32, j: u32) -> Option<(Point2<f64>, Poi
     Some((Point2::new(u, v), hit))
 }
 
-fn targets(truth: &Station, frame: &WorldFrame, spec: &SessionSpec, rng: &mut Xoshiro256PlusPlus) -> Vec<Target> {
+fn targets(
+    truth: &Station,
+    frame: &WorldFrame,
+    spec: &SessionSpec,
+    rng: &mut Xoshiro256PlusPlus,
+) -> Vec<Target> {
     let cam = &truth.camera;
     let [nx, ny] = spec.targets_grid;
     let mut out = Vec::new();
@@ -166,7 +171,11 @@ fn targets(truth: &Station, frame: &WorldFrame, spec: &SessionSpec, rng: &mut Xo
     out
 }
 
-fn flat_screen(truth: &Station, spec: &SessionSpec, rng: &mut Xoshiro256PlusPlus) -> Vec<FlatPixel> {
+fn flat_screen(
+    truth: &Station,
+    spec: &SessionSpec,
+    rng: &mut Xoshiro256PlusPlus,
+) -> Vec<FlatPixel> {
     let cam = &truth.camera;
     let [nx, ny] = spec.flat_grid;
     let s = spec.flat_std_px;
@@ -229,7 +238,10 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
         problem: problem.into(),
     };
     if spec.target_heights_mm.len() < 2 {
-        return Err(invalid("target_heights_mm", "two or more heights are needed"));
+        return Err(invalid(
+            "target_heights_mm",
+            "two or more heights are needed",
+        ));
     }
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(spec.seed);
     let mut truth = truth.clone();
@@ -244,7 +256,11 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
     let sd = spec.stage_std_mm;
     let flat_points = (0..9)
         .map(|k| {
-            let w = Point3::new(40.0 * f64::from(k % 3) - 40.0, 40.0 * f64::from(k / 3) - 40.0, 0.0);
+            let w = Point3::new(
+                40.0 * f64::from(k % 3) - 40.0,
+                40.0 * f64::from(k / 3) - 40.0,
+                0.0,
+            );
             noisy(&mut rng, frame.to_stage(&w), sd)
         })
         .collect();
@@ -261,7 +277,10 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
     let targets = targets(&truth, &frame, spec, &mut rng);
     let flat = flat_screen(&truth, spec, &mut rng);
     if targets.len() < 6 || flat.len() < 50 {
-        return Err(invalid("targets_grid", "too few targets or flat pixels land on the sensor"));
+        return Err(invalid(
+            "targets_grid",
+            "too few targets or flat pixels land on the sensor",
+        ));
     }
     let e = &truth.element;
     let input = CalibrationInput {
@@ -275,7 +294,11 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
         targets,
         flat_screen: flat,
     };
-    Ok(SimulatedSession { input, truth, frame })
+    Ok(SimulatedSession {
+        input,
+        truth,
+        frame,
+    })
 }
 
 /// A rendered target frame: a Gaussian spot (σ 1.5 px, 3000 counts peak)
@@ -288,8 +311,14 @@ pub fn render_target(width: u32, height: u32, pixel: Point2<f64>, seed: u64) -> 
     for (k, v) in out.iter_mut().enumerate() {
         let (x, y) = ((k % w) as f64 + 0.5, (k / w) as f64 + 0.5);
         let r2 = (x - pixel.x).powi(2) + (y - pixel.y).powi(2);
-        let spot = if r2 < 100.0 { 3000.0 * (-r2 / (2.0 * 1.5 * 1.5)).exp() } else { 0.0 };
-        *v = (200.0 + spot + gauss(&mut rng, 10.0)).round().clamp(0.0, 65535.0) as u16;
+        let spot = if r2 < 100.0 {
+            3000.0 * (-r2 / (2.0 * 1.5 * 1.5)).exp()
+        } else {
+            0.0
+        };
+        *v = (200.0 + spot + gauss(&mut rng, 10.0))
+            .round()
+            .clamp(0.0, 65535.0) as u16;
     }
     out
 }
@@ -321,7 +350,13 @@ pub fn write_session(session: &SimulatedSession, dir: &Path) -> Result<(), SimEr
             image_px: None,
         });
     }
-    let points = |v: &[Vector3<f64>]| v.iter().map(|p| StagePoint { stage_mm: (*p).into() }).collect();
+    let points = |v: &[Vector3<f64>]| {
+        v.iter()
+            .map(|p| StagePoint {
+                stage_mm: (*p).into(),
+            })
+            .collect()
+    };
     let file = SessionFile {
         format: SESSION_FORMAT.into(),
         nominal_station: "nominal.toml".into(),
@@ -408,50 +443,5 @@ pub fn example_truth() -> Result<Station, StationError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::calibrate::session_file::SessionFile;
-    use crate::formats::image_io::read_gray;
-
-    #[test]
-    fn a_session_folder_reads_back() {
-        let truth = example_truth().unwrap();
-        let spec = SessionSpec {
-            targets_grid: [3, 2],
-            ..SessionSpec::default()
-        };
-        let sim = simulate_session(&truth, &spec).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        write_session(&sim, dir.path()).unwrap();
-        let text = std::fs::read_to_string(dir.path().join("session.toml")).unwrap();
-        let file: SessionFile = toml::from_str(&text).unwrap();
-        assert_eq!(file.format, SESSION_FORMAT);
-        assert_eq!(file.target_point.len(), sim.input.targets.len());
-        assert_eq!(file.reference_flat.acquisition, "flat/acquisition.toml");
-        Station::load(&dir.path().join(&file.nominal_station)).unwrap();
-        let t = &sim.input.targets[0];
-        let img = read_gray(&dir.path().join(file.target_point[0].image.as_ref().unwrap())).unwrap();
-        assert_eq!((img.width, img.height, img.bit_depth), (truth.camera.width, truth.camera.height, 16));
-        // The brightest pixel is the one under the spot's centre.
-        let (k, _) = img.data.iter().enumerate().max_by_key(|(_, v)| **v).unwrap();
-        let (i, j) = ((k % img.width as usize) as f64, (k / img.width as usize) as f64);
-        assert!((i + 0.5 - t.pixel.x).abs() <= 1.0 && (j + 0.5 - t.pixel.y).abs() <= 1.0);
-    }
-
-    #[test]
-    fn the_simulated_readings_carry_the_stated_noise() {
-        let truth = example_truth().unwrap();
-        let sim = simulate_session(&truth, &SessionSpec::default()).unwrap();
-        // Flat points lie on the true plane to the stage noise: RMS of 9
-        // N(0, 1 µm) heights is within 1 µm · (1 ± 4·√(1/18)).
-        let z: Vec<f64> = sim.input.flat_points_stage_mm.iter().map(|p| sim.frame.to_world(p).z).collect();
-        let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
-        assert!((rms / 1e-3 - 1.0).abs() < 4.0 * (1.0_f64 / 18.0).sqrt(), "{rms}");
-        // Targets at two or more heights, spread over the sensor.
-        let heights: Vec<f64> = sim.input.targets.iter().map(|t| sim.frame.to_world(&t.stage_mm).z.round()).collect();
-        assert!(heights.iter().any(|h| *h == 0.0) && heights.iter().any(|h| *h == 120.0));
-        let xs: Vec<f64> = sim.input.targets.iter().map(|t| t.pixel.x).collect();
-        let spread = xs.iter().copied().fold(f64::MIN, f64::max) - xs.iter().copied().fold(f64::MAX, f64::min);
-        assert!(spread > 0.8 * f64::from(truth.camera.width));
-    }
-}
+#[path = "session_tests.rs"]
+mod tests;
