@@ -17,12 +17,13 @@ use std::time::Instant;
 use crate::acquire::acquisition::{Acquisition, AcquisitionError};
 use crate::formats::npy::{self, NpyError};
 use crate::formats::surfaces_file::{SurfacesFile, SurfacesFileError};
-use crate::optics::station::Station;
+use crate::optics::station::{Station, StationUncertainty};
 use crate::report::pictures;
 use crate::report::plot::PlotError;
 use crate::report::summary::Summary;
 use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::report::height_grid;
+use crate::solve::surfaces::station_error::{station_induced, StationInduced};
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
     Uncertainty,
@@ -188,6 +189,9 @@ pub struct Options {
     pub spectral: SpectralConfig,
     /// The surface stage's options; `None` stops after the spectral stage.
     pub surfaces: Option<SurfaceOptions>,
+    /// The station's uncertainty: when given, the surface stage also
+    /// reports the error it induces beside the noise's.
+    pub station_uncertainty: Option<StationUncertainty>,
 }
 
 /// The spectral stage's result.
@@ -210,6 +214,8 @@ pub struct SurfaceStage {
     pub solution: SurfaceSolution,
     /// Its figures (`summary.json`).
     pub summary: Summary,
+    /// The station-induced covariance, when a station uncertainty was given.
+    pub station_induced: Option<StationInduced>,
 }
 
 /// A reconstruction: whichever stages ran.
@@ -260,7 +266,7 @@ pub fn reconstruct(
     let surfaces = options
         .surfaces
         .as_ref()
-        .map(|opts| surface_stage(&first, station, opts));
+        .map(|opts| surface_stage(&first, station, opts, options.station_uncertainty.as_ref()));
     let spectral = match first {
         First::Spectral(s) => Some(s),
         First::Points(_) => None,
@@ -278,6 +284,7 @@ fn surface_stage(
     first: &First,
     station: &Station,
     opts: &SurfaceOptions,
+    uncertainty: Option<&StationUncertainty>,
 ) -> Result<SurfaceStage, SurfaceError> {
     let t = Instant::now();
     let obs = match first {
@@ -288,8 +295,19 @@ fn surface_stage(
         First::Points(p) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
     };
     let solution = solve_surfaces(&obs, station, opts)?;
-    let summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
-    Ok(SurfaceStage { solution, summary })
+    let station_induced = match uncertainty {
+        Some(u) => Some(station_induced(&obs, station, u, &solution, opts)?),
+        None => None,
+    };
+    let mut summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
+    if let Some(induced) = &station_induced {
+        summary = summary.with_station(induced);
+    }
+    Ok(SurfaceStage {
+        solution,
+        summary,
+        station_induced,
+    })
 }
 
 fn spectral_stage(

@@ -160,3 +160,49 @@ fn camera_rays_and_projection_round_trip_over_the_sensor() {
     // Newton's tolerance (1e-14 normalised) times F = 533 px: 5e-12 px.
     assert!(worst < 1e-9, "round trip {worst:e} px");
 }
+
+/// The bench station (48 × 48, whole element in view) made version 2.
+fn v2_bench() -> Station {
+    let mut s = mfd::optics::station::bench_station(10.0, 1.5, 15.0).unwrap();
+    s.camera.distortion = Some(mfd::optics::station::Distortion {
+        k: [-0.12, 0.03, 0.0],
+        p: [0.0004, -0.0002],
+    });
+    s.screen.cover_glass = Some(mfd::optics::station::CoverGlass {
+        thickness_mm: 1.8,
+        refractive_index: 1.52,
+    });
+    s.element.pose.tilt_deg = [1.0, 0.0];
+    Station::from_file(&s.to_file(), Path::new("<v2 bench>")).unwrap()
+}
+
+#[test]
+fn the_whole_chain_honours_version_2_noise_free() {
+    // Rendered frames → spectral stage (its geometry prior from the v2
+    // station) → surfaces, all on the v2 station.
+    let station = v2_bench();
+    let r = common::spectral::run(
+        &station,
+        mfd::sim::SimParams::default(),
+        &common::spectral::paper_schedule(),
+        mfd::solve::spectral::Engine::Statistics,
+    );
+    let [(rms1, _, worst1, found1, exp1), (rms2, _, _, found2, exp2)] = common::spectral::score(&r);
+    println!("S1 RMS {rms1:.2e} px (worst {worst1:.2e}), {found1}/{exp1}; S2 RMS {rms2:.2e} px, {found2}/{exp2}");
+    // Noise-free: the spectral stage's own bound of 0.01 px, and 99 % found
+    // (tests/spectral_sim.rs on the version-1 station).
+    assert!(worst1 <= 0.01 && found1 as f64 >= 0.99 * exp1 as f64);
+    assert!(found2 as f64 >= 0.99 * exp2 as f64);
+    let cov = r.maps.screen_cov();
+    let obs =
+        Observations::from_maps(&station, &r.maps.screen_coords(), Uncertainty::Cov(&cov)).unwrap();
+    let sol = reconstruct(&obs, &station, &SurfaceOptions { terms: Some(36), ..Default::default() })
+        .unwrap();
+    let (front, back) = RandomSurfaceSpec::default()
+        .draw_pair(25.5, [0.0, 0.0], 21)
+        .unwrap();
+    let (ef, eb) = (rms_err(&sol.front, &front), rms_err(&sol.back, &back));
+    println!("whole chain, v2 bench station, noise-free: front {ef:.3} nm, back {eb:.3} nm");
+    // The Done-when's 0.5 nm front, 1 nm back.
+    assert!(ef <= 0.5 && eb <= 1.0, "front {ef} back {eb}");
+}

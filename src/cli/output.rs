@@ -102,6 +102,27 @@ fn print_surfaces(stage: &SurfaceStage) {
             f.terms, f.rms_nm, f.rms_std_nm, f.pv_nm, f.error_rms_nm
         );
     }
+    if let Some(st) = &summary.station {
+        let splits = [("front", Some(&st.front)), ("back", st.back.as_ref())];
+        for (name, s) in splits.into_iter().filter_map(|(n, s)| Some((n, s?))) {
+            println!(
+                "{name}: expected error {:.2} nm RMS = noise {:.2} ⊕ station {:.2} nm",
+                s.total_rms_nm, s.noise_rms_nm, s.station_rms_nm
+            );
+        }
+        let top: Vec<String> = st
+            .largest
+            .iter()
+            .take(3)
+            .map(|s| {
+                format!(
+                    "{} (front {:.2}, back {:.2} nm)",
+                    s.name, s.front_rms_nm, s.back_rms_nm
+                )
+            })
+            .collect();
+        println!("  station: largest shares {}", top.join(", "));
+    }
     let iters: Vec<String> = sol
         .stages
         .iter()

@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use mfd::acquire::acquisition::Acquisition;
-use mfd::optics::station::Station;
+use mfd::optics::station::{Station, StationUncertainty};
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::{self, Input, Options, ScreenPoints};
 use mfd::solve::spectral::{PixelFlags, SpectralConfig};
@@ -37,6 +37,12 @@ pub struct ReconstructArgs {
     /// Station file; default: the one the acquisition names.
     #[arg(long)]
     station: Option<PathBuf>,
+    /// The station's uncertainty (mfd-station-uncertainty/1, e.g. from
+    /// `mfd calibrate solve`): summary.json then gives each surface's
+    /// station-induced error beside the noise's, and the degrees of
+    /// freedom that contribute most (one re-solve per degree of freedom).
+    #[arg(long)]
+    uncertainty: Option<PathBuf>,
     /// Allow a third reflection (second internal round trip, paper §5.1b).
     #[arg(long)]
     third_reflection: bool,
@@ -69,9 +75,14 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         anyhow::bail!("--roi takes four numbers x0,y0,x1,y1");
     }
     let surface_opts = args.surfaces.options(args.edge_margin_mm)?;
+    let station_uncertainty = args
+        .uncertainty
+        .as_deref()
+        .map(StationUncertainty::load)
+        .transpose()?;
     let surfaces = (!args.surfaces.no_surfaces).then_some(surface_opts);
     let Some(acq_dir) = &args.acquisition else {
-        return from_screen_coords(args, surfaces);
+        return from_screen_coords(args, surfaces, station_uncertainty);
     };
     let mut acq = Acquisition::open(acq_dir)?;
     let station_path = args
@@ -90,6 +101,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
             ..args.spectral.config()
         },
         surfaces,
+        station_uncertainty,
     };
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
@@ -110,6 +122,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
 fn from_screen_coords(
     args: &ReconstructArgs,
     surfaces: Option<mfd::solve::surfaces::SurfaceOptions>,
+    station_uncertainty: Option<StationUncertainty>,
 ) -> anyhow::Result<()> {
     let (Some(coords_path), Some(station_path)) = (&args.screen_coords, &args.station) else {
         anyhow::bail!("give an acquisition folder, or --screen-coords with --station");
@@ -122,6 +135,7 @@ fn from_screen_coords(
     }
     let options = Options {
         surfaces,
+        station_uncertainty,
         ..Options::default()
     };
     let rec = pipeline::reconstruct(

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::solve::surfaces::report::{figures, SurfaceFigures, FIGURES_NOTE};
 use crate::solve::surfaces::select::{TermChoice, CRITERION};
 use crate::solve::surfaces::solve::{Stage, OUTLIER_RULE};
+use crate::solve::surfaces::station_error::StationInduced;
 use crate::solve::surfaces::{Observations, SurfaceSolution};
 
 /// The `format` value of a summary.
@@ -52,7 +53,57 @@ pub struct Summary {
     pub condition_number: f64,
     /// Wall time of the surface stage, s.
     pub seconds: f64,
+    /// The station's uncertainty beside the noise, when one was given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub station: Option<StationPart>,
 }
+
+/// What the station's uncertainty adds to each surface's error, beside the
+/// noise-only figures (`--uncertainty`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StationPart {
+    /// How the station-induced part was computed ([`STATION_NOTE`]).
+    pub note: String,
+    /// The front's split.
+    pub front: ErrorSplit,
+    /// The back's split; `null` when it was not reconstructed.
+    pub back: Option<ErrorSplit>,
+    /// The degrees of freedom that contribute most, largest first (at most 10).
+    pub largest: Vec<Share>,
+}
+
+/// Noise-only, station-induced and total expected error of one surface.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ErrorSplit {
+    /// Expected RMS error from the noise, piston and tilt removed, nm.
+    pub noise_rms_nm: f64,
+    /// Expected RMS error from the station's uncertainty, nm.
+    pub station_rms_nm: f64,
+    /// Both together (root sum of squares), nm.
+    pub total_rms_nm: f64,
+    /// Per-coefficient σ from the station alone, nm.
+    pub station_std_nm: Vec<f64>,
+    /// Per-coefficient σ of noise and station together, nm.
+    pub total_std_nm: Vec<f64>,
+}
+
+/// One degree of freedom's share.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Share {
+    /// Its spec name.
+    pub name: String,
+    /// Its 1σ.
+    pub std: f64,
+    /// The front's RMS change for one σ, nm.
+    pub front_rms_nm: f64,
+    /// The back's, nm.
+    pub back_rms_nm: f64,
+}
+
+/// How the station-induced part is computed, for the summary's reader.
+pub const STATION_NOTE: &str = "each degree of freedom of the station uncertainty applied by one \
+sigma, the same screen points re-solved on the changed station; covariance J C J^T with C the \
+station's correlation; noise and station parts independent";
 
 /// Pixels that entered the surface stage.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
@@ -182,7 +233,47 @@ impl Summary {
             covariance_scale: sol.covariance_scale,
             condition_number: sol.condition_number,
             seconds,
+            station: None,
         }
+    }
+
+    /// The summary with the station-induced part beside the noise's.
+    pub fn with_station(mut self, induced: &StationInduced) -> Summary {
+        let split = |noise: &SurfaceFigures, cov: &nalgebra::DMatrix<f64>, rms: f64| {
+            let station_std_nm: Vec<f64> = (0..cov.nrows()).map(|k| cov[(k, k)].sqrt()).collect();
+            ErrorSplit {
+                noise_rms_nm: noise.error_rms_nm,
+                station_rms_nm: rms,
+                total_rms_nm: noise.error_rms_nm.hypot(rms),
+                total_std_nm: noise
+                    .std_nm
+                    .iter()
+                    .zip(&station_std_nm)
+                    .map(|(a, b)| a.hypot(*b))
+                    .collect(),
+                station_std_nm,
+            }
+        };
+        self.station = Some(StationPart {
+            note: STATION_NOTE.into(),
+            front: split(&self.front, &induced.front_cov_nm2, induced.front_rms_nm),
+            back: self
+                .back
+                .as_ref()
+                .map(|b| split(b, &induced.back_cov_nm2, induced.back_rms_nm)),
+            largest: induced
+                .shares
+                .iter()
+                .take(10)
+                .map(|s| Share {
+                    name: s.dof.name().into(),
+                    std: s.std,
+                    front_rms_nm: s.front_rms_nm,
+                    back_rms_nm: s.back_rms_nm,
+                })
+                .collect(),
+        });
+        self
     }
 }
 

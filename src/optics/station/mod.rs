@@ -10,8 +10,10 @@
 mod build;
 mod cover_glass;
 mod distortion;
+mod dof;
 mod file;
 mod pose;
+mod uncertainty;
 mod validate;
 
 use std::path::{Path, PathBuf};
@@ -21,11 +23,13 @@ use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 pub use build::{bench_station, CameraProfile, DisplayProfile, SymmetricLayout};
 pub use cover_glass::CoverGlass;
 pub use distortion::Distortion;
+pub use dof::Dof;
 pub use file::{
     CameraFile, CoverGlassFile, DistortionFile, ElementFile, ScreenFile, StationFile,
     STATION_FORMAT, STATION_FORMAT_V2,
 };
 pub use pose::Pose;
+pub use uncertainty::{StationUncertainty, UncertaintyError, UNCERTAINTY_FORMAT};
 
 /// What went wrong reading or checking a station.
 #[derive(Debug, thiserror::Error)]

@@ -18,6 +18,7 @@ pub mod problem;
 pub mod report;
 pub mod select;
 pub mod solve;
+pub mod station_error;
 
 pub use problem::{Layout, Observation, Observations, Uncertainty};
 pub use solve::{reconstruct, SurfaceOptions, SurfaceSolution};
