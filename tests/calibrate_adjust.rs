@@ -258,10 +258,12 @@ fn a_calibration_writes_the_three_files() {
     assert_eq!(station, cal.station);
     let text = std::fs::read_to_string(dir.path().join("station.toml")).unwrap();
     assert!(text.contains("mfd-station/2"));
-    let unc: toml::Value = toml::from_str(
-        &std::fs::read_to_string(dir.path().join("station_uncertainty.toml")).unwrap(),
-    )
-    .unwrap();
+    let path = dir.path().join("station_uncertainty.toml");
+    // The lead's reader accepts it (symmetry, positive semi-definiteness).
+    let read = mfd::optics::station::StationUncertainty::load(&path).unwrap();
+    assert_eq!(read.correlated, 26);
+    assert!(read.std_of(mfd::optics::station::Dof::K3) > 0.0);
+    let unc: toml::Value = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     assert_eq!(unc["format"].as_str(), Some("mfd-station-uncertainty/1"));
     let names = unc["covariance"]["names"].as_array().unwrap();
     assert!(names

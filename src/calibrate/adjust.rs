@@ -375,6 +375,7 @@ fn consider_covariance(n: &DMatrix<f64>, n_est: usize, held: &[Param]) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optics::station::Dof;
 
     #[test]
     fn a_degenerate_pair_holds_the_one_with_the_narrow_prior() {
@@ -384,9 +385,9 @@ mod tests {
         let j = DMatrix::from_row_slice(3, 3, &[1.0, 1.0, 0.0, 2.0, 2.0, 0.0, 0.0, 0.0, 1.0]);
         let n = j.transpose() * &j;
         let params = [
-            Param::Station("screen.z_mm"),
-            Param::Station("screen.pixel_pitch_mm"),
-            Param::Station("camera.x_mm"),
+            Param::Station(Dof::ScreenZ),
+            Param::Station(Dof::ScreenPitch),
+            Param::Station(Dof::CameraX),
         ];
         let (keep, sel) = select(&n, &params);
         assert_eq!(keep, vec![0, 2]);
@@ -401,7 +402,7 @@ mod tests {
         // y = a + b with b held at σ_b: a's σ² is 1/N_aa + σ_b² and a, b
         // are anticorrelated by exactly −σ_b².
         let n = DMatrix::from_row_slice(2, 2, &[4.0, 4.0, 4.0, 4.0]);
-        let held = [Param::Station("screen.pixel_pitch_mm")];
+        let held = [Param::Station(Dof::ScreenPitch)];
         let c = consider_covariance(&n, 1, &held).unwrap();
         let s2 = 2.7e-5_f64.powi(2);
         assert!((c[(0, 0)] - (0.25 + s2)).abs() < 1e-15);

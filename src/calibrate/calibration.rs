@@ -16,7 +16,7 @@ use super::params::{Param, State, WorldFrame, STATION_DOFS};
 use super::report::{Report, StepReport};
 use super::resect::resect;
 use super::residuals::{flat_reflection_uv, Blocks};
-use crate::optics::station::{Pose, Station};
+use crate::optics::station::{Dof, Pose, Station, StationUncertainty};
 
 /// The fewest flat points that define a plane.
 pub const MIN_FLAT_POINTS: usize = 3;
@@ -34,8 +34,8 @@ pub struct Calibration {
     /// Their covariance (held ones with their prior σ and its effect on the
     /// estimated ones).
     pub covariance: DMatrix<f64>,
-    /// 1 σ of what the session gave: `element.thickness_mm`, `element.refractive_index`.
-    pub given_std: Vec<(String, f64)>,
+    /// 1 σ of what the session gave: the thickness and the index.
+    pub given_std: Vec<(Dof, f64)>,
     /// The report.
     pub report: Report,
 }
@@ -133,7 +133,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         "screen",
     )?;
     let mut all = vec![Param::PlaneHeight, Param::PlaneSlopeX, Param::PlaneSlopeY];
-    all.extend(STATION_DOFS.iter().map(|d| Param::Station(d.name)));
+    all.extend(STATION_DOFS.iter().map(|d| Param::Station(d.dof)));
     let joint = adjust(input, screen.state.clone(), &all, Blocks::ALL, "joint")?;
     let steps = vec![
         StepReport::new("resection", input, &camera, resection_blocks()),
@@ -141,17 +141,21 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         StepReport::new("joint", input, &joint, Blocks::ALL),
     ];
     let report = Report::new(input, steps);
-    let station = joint.state.station.clone();
-    Station::from_file(&station.to_file(), Path::new("<calibrated station>"))
-        .map_err(|source| CalibrationError::InvalidResult { source })?;
+    // Validated as a loaded file is, and as a reader will see it (axes
+    // normalised).
+    let station = Station::from_file(
+        &joint.state.station.to_file(),
+        Path::new("<calibrated station>"),
+    )
+    .map_err(|source| CalibrationError::InvalidResult { source })?;
     Ok(Calibration {
         station,
         frame: joint.state.frame,
         names: joint.params.iter().map(|p| p.name().to_string()).collect(),
         covariance: joint.covariance.clone(),
         given_std: vec![
-            ("element.thickness_mm".into(), input.thickness_mm.1),
-            ("element.refractive_index".into(), input.refractive_index.1),
+            (Dof::Thickness, input.thickness_mm.1),
+            (Dof::RefractiveIndex, input.refractive_index.1),
         ],
         report,
     })
@@ -169,8 +173,8 @@ fn resection_blocks() -> Blocks {
 fn dofs_of(prefix: &str) -> Vec<Param> {
     STATION_DOFS
         .iter()
-        .filter(|d| d.name.starts_with(prefix))
-        .map(|d| Param::Station(d.name))
+        .filter(|d| d.dof.name().starts_with(prefix))
+        .map(|d| Param::Station(d.dof))
         .collect()
 }
 
@@ -227,29 +231,36 @@ impl Calibration {
         let station = dir.join("station.toml");
         std::fs::write(&station, self.station.to_toml_string()).map_err(io(&station))?;
         let unc = dir.join("station_uncertainty.toml");
-        std::fs::write(&unc, self.uncertainty_toml("station.toml")).map_err(io(&unc))?;
+        let text = self.uncertainty("station.toml").to_toml_string();
+        std::fs::write(&unc, text).map_err(io(&unc))?;
         let report = dir.join("report.json");
         std::fs::write(&report, self.report.to_json()).map_err(io(&report))?;
         Ok(())
     }
 
-    /// `mfd-station-uncertainty/1` text: the full covariance of the
-    /// station's degrees of freedom, `[std]` for the given thickness and index.
-    pub fn uncertainty_toml(&self, station_file: &str) -> String {
+    /// The station's uncertainty (`mfd-station-uncertainty/1`, for the
+    /// station file `station_file`): the full covariance of the station's
+    /// degrees of freedom (estimated and held), then the thickness and index
+    /// as given, uncorrelated (`[std]`).
+    pub fn uncertainty(&self, station_file: &str) -> StationUncertainty {
         let (names, m) = self.station_covariance();
-        let matrix: Vec<Vec<f64>> = (0..m.nrows())
-            .map(|i| {
-                (0..m.ncols())
-                    .map(|j| 0.5 * (m[(i, j)] + m[(j, i)]))
-                    .collect()
-            })
-            .collect();
-        let file = super::report::UncertaintyFile {
-            format: "mfd-station-uncertainty/1".into(),
+        let mut dofs: Vec<Dof> = names.iter().filter_map(|n| Dof::parse(n)).collect();
+        let k = dofs.len();
+        dofs.extend(self.given_std.iter().map(|(d, _)| *d));
+        let mut covariance = DMatrix::zeros(dofs.len(), dofs.len());
+        for r in 0..k {
+            for c in 0..k {
+                covariance[(r, c)] = 0.5 * (m[(r, c)] + m[(c, r)]);
+            }
+        }
+        for (i, (_, s)) in self.given_std.iter().enumerate() {
+            covariance[(k + i, k + i)] = s * s;
+        }
+        StationUncertainty {
             station: station_file.into(),
-            std: self.given_std.iter().cloned().collect(),
-            covariance: super::report::CovarianceTable { names, matrix },
-        };
-        toml::to_string(&file).unwrap_or_default()
+            names: dofs,
+            covariance,
+            correlated: k,
+        }
     }
 }

@@ -3,8 +3,6 @@
 //! normal matrix's condition numbers. Serialised to `report.json` and
 //! printed as a short summary for the operator.
 
-use std::collections::BTreeMap;
-
 use nalgebra::Matrix2;
 use serde::Serialize;
 
@@ -194,26 +192,4 @@ impl Report {
         }
         s
     }
-}
-
-/// `mfd-station-uncertainty/1` on disk.
-#[derive(Debug, Clone, Serialize)]
-pub struct UncertaintyFile {
-    /// The format tag.
-    pub format: String,
-    /// The station these are the uncertainties of.
-    pub station: String,
-    /// 1 σ per given degree of freedom.
-    pub std: BTreeMap<String, f64>,
-    /// The full covariance of the determined ones.
-    pub covariance: CovarianceTable,
-}
-
-/// `[covariance]`.
-#[derive(Debug, Clone, Serialize)]
-pub struct CovarianceTable {
-    /// The degrees of freedom, in the matrix's order.
-    pub names: Vec<String>,
-    /// Row-major covariance.
-    pub matrix: Vec<Vec<f64>>,
 }

@@ -25,8 +25,8 @@ pub const MIN_TARGETS: usize = 6;
 pub fn camera_params() -> Vec<Param> {
     STATION_DOFS
         .iter()
-        .filter(|d| d.name.starts_with("camera."))
-        .map(|d| Param::Station(d.name))
+        .filter(|d| d.dof.name().starts_with("camera."))
+        .map(|d| Param::Station(d.dof))
         .collect()
 }
 

@@ -16,13 +16,13 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use super::SimError;
 use crate::calibrate::input::{CalibrationInput, FlatPixel, Target};
-use crate::calibrate::params::{perturb_station, prior, WorldFrame};
+use crate::calibrate::params::{prior, WorldFrame};
 use crate::calibrate::session_file::{
     ReferenceFlat, SessionElement, SessionFile, StagePoint, TargetPoint, SESSION_FORMAT,
 };
 use crate::formats::image_io::write_png;
 use crate::optics::refraction::reflect;
-use crate::optics::station::{Distortion, Station, StationError};
+use crate::optics::station::{Distortion, Dof, Station, StationError};
 use crate::optics::trace::to_screen;
 
 /// What to simulate.
@@ -89,25 +89,25 @@ pub struct SimulatedSession {
 /// lens, the pitch and the element's in-plane position at their prior
 /// ranges (they are held, so their errors must be what the calibration
 /// says it carries). The element's height and tilts start from zero.
-const NOMINAL_ERRORS: [(&str, f64); 18] = [
-    ("camera.x_mm", 2.0),
-    ("camera.y_mm", 2.0),
-    ("camera.z_mm", 2.0),
-    ("camera.rx_deg", 0.2),
-    ("camera.ry_deg", 0.2),
-    ("camera.rz_deg", 0.2),
-    ("camera.focal_length_mm", 0.1),
-    ("camera.cx_px", 5.0),
-    ("camera.cy_px", 5.0),
-    ("screen.x_mm", 2.0),
-    ("screen.y_mm", 2.0),
-    ("screen.z_mm", 2.0),
-    ("screen.rx_deg", 0.2),
-    ("screen.ry_deg", 0.2),
-    ("screen.rz_deg", 0.2),
-    ("screen.pixel_pitch_mm", f64::NAN),
-    ("element.x_mm", f64::NAN),
-    ("element.y_mm", f64::NAN),
+const NOMINAL_ERRORS: [(Dof, f64); 18] = [
+    (Dof::CameraX, 2.0),
+    (Dof::CameraY, 2.0),
+    (Dof::CameraZ, 2.0),
+    (Dof::CameraRx, 0.2),
+    (Dof::CameraRy, 0.2),
+    (Dof::CameraRz, 0.2),
+    (Dof::FocalLength, 0.1),
+    (Dof::Cx, 5.0),
+    (Dof::Cy, 5.0),
+    (Dof::ScreenX, 2.0),
+    (Dof::ScreenY, 2.0),
+    (Dof::ScreenZ, 2.0),
+    (Dof::ScreenRx, 0.2),
+    (Dof::ScreenRy, 0.2),
+    (Dof::ScreenRz, 0.2),
+    (Dof::ScreenPitch, f64::NAN),
+    (Dof::ElementX, f64::NAN),
+    (Dof::ElementY, f64::NAN),
 ];
 
 fn gauss(rng: &mut Xoshiro256PlusPlus, sigma: f64) -> f64 {
@@ -210,12 +210,12 @@ fn nominal(truth: &Station, rng: &mut Xoshiro256PlusPlus) -> Station {
         } else {
             sigma
         };
-        perturb_station(&mut s, name, gauss(rng, sigma));
+        s = s.perturbed(name, gauss(rng, sigma));
     }
     // The lens is unknown but for k3, which a short lens's data cannot
     // determine: its nominal value is off by its prior range.
     let k3 = s.camera.distortion.map_or(0.0, |d| d.k[2]);
-    let p3 = prior("camera.k3").map_or(0.0, |p| p.prior_std);
+    let p3 = prior(Dof::K3).map_or(0.0, |p| p.prior_std);
     s.camera.distortion = Some(Distortion {
         k: [0.0, 0.0, k3 + gauss(rng, p3)],
         p: [0.0; 2],
@@ -245,9 +245,9 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
     }
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(spec.seed);
     let mut truth = truth.clone();
-    for name in ["element.x_mm", "element.y_mm"] {
-        let p = prior(name).map_or(0.0, |p| p.prior_std);
-        perturb_station(&mut truth, name, gauss(&mut rng, p));
+    for dof in [Dof::ElementX, Dof::ElementY] {
+        let p = prior(dof).map_or(0.0, |p| p.prior_std);
+        truth = truth.perturbed(dof, gauss(&mut rng, p));
     }
     let frame = WorldFrame {
         plane: spec.plane,
@@ -429,13 +429,13 @@ pub fn example_truth() -> Result<Station, StationError> {
     });
     s.camera.principal_point_px = Point2::new(655.3, 478.9);
     for (name, d) in [
-        ("camera.rx_deg", 0.3),
-        ("camera.rz_deg", -0.4),
-        ("screen.ry_deg", 0.5),
-        ("screen.rz_deg", 0.2),
-        ("screen.x_mm", 3.0),
+        (Dof::CameraRx, 0.3),
+        (Dof::CameraRz, -0.4),
+        (Dof::ScreenRy, 0.5),
+        (Dof::ScreenRz, 0.2),
+        (Dof::ScreenX, 3.0),
     ] {
-        perturb_station(&mut s, name, d);
+        s = s.perturbed(name, d);
     }
     s.element.pose.tilt_deg = [1.0, -0.3];
     s.element.pose.offset_mm = Vector3::new(0.0, 0.0, 0.012);
