@@ -20,12 +20,13 @@
 //! problem is small (tens of parameters).
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::error::CalibrationError;
 use super::input::CalibrationInput;
 use super::params::{Param, State};
-use super::residuals::{whitened, Blocks, Whitening};
+use super::residuals::{item, item_count, Blocks, Whitening};
 use crate::kernels::lm::{minimise, Damping, LeastSquares, Linearisation};
 
 /// The schedule: the calibration starts within millimetres and tenths of a
@@ -83,37 +84,55 @@ impl LeastSquares for Problem<'_> {
     type Normal = Normal;
     type Error = std::convert::Infallible;
 
+    /// Accumulates `JᵀJ`, `Jᵀr` and the cost reading by reading (each one's
+    /// rows from the base state and the states shifted by ± each
+    /// parameter's step), so that a flat map of every camera pixel needs no
+    /// Jacobian in memory.
     fn evaluate(&self, p: &State) -> Normal {
-        let r = DVector::from_vec(whitened(self.input, p, self.blocks, self.whitening));
-        let mut j = DMatrix::zeros(r.len(), self.params.len());
-        for (k, param) in self.params.iter().enumerate() {
-            let h = param.step();
-            let plus = whitened(
-                self.input,
-                &p.perturbed(*param, h),
-                self.blocks,
-                self.whitening,
-            );
-            let minus = whitened(
-                self.input,
-                &p.perturbed(*param, -h),
-                self.blocks,
-                self.whitening,
-            );
-            for (row, (a, b)) in plus.iter().zip(&minus).enumerate() {
-                j[(row, k)] = (a - b) / (2.0 * h);
-            }
-        }
-        let cost = r.norm_squared();
+        let n = self.params.len();
+        let shifted: Vec<(State, State, f64)> = self
+            .params
+            .iter()
+            .map(|q| {
+                (
+                    p.perturbed(*q, q.step()),
+                    p.perturbed(*q, -q.step()),
+                    q.step(),
+                )
+            })
+            .collect();
+        let (input, blocks, w) = (self.input, self.blocks, self.whitening);
+        let zero = || (DMatrix::zeros(n, n), DVector::zeros(n), 0.0, 0usize);
+        let (jtj, jtr, cost, residuals) = (0..item_count(input, blocks))
+            .into_par_iter()
+            .with_min_len(16)
+            .fold(zero, |(mut a, mut g, mut c, mut m), k| {
+                let (r0, len) = item(input, p, blocks, w, k);
+                let mut rows = DMatrix::zeros(len, n);
+                for (col, (plus, minus, h)) in shifted.iter().enumerate() {
+                    let (rp, _) = item(input, plus, blocks, w, k);
+                    let (rm, _) = item(input, minus, blocks, w, k);
+                    for row in 0..len {
+                        rows[(row, col)] = (rp[row] - rm[row]) / (2.0 * h);
+                    }
+                }
+                let r = DVector::from_column_slice(&r0[..len]);
+                a += rows.transpose() * &rows;
+                g -= rows.transpose() * &r;
+                c += r.norm_squared();
+                m += len;
+                (a, g, c, m)
+            })
+            .reduce(zero, |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2, x.3 + y.3));
         Normal {
             cost: if cost.is_finite() {
                 cost
             } else {
                 f64::INFINITY
             },
-            jtj: j.transpose() * &j,
-            jtr: -(j.transpose() * &r),
-            residuals: r.len(),
+            jtj,
+            jtr,
+            residuals,
         }
     }
 

@@ -10,7 +10,7 @@
 use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Unit, Vector2, Vector3};
 use rayon::prelude::*;
 
-use super::input::CalibrationInput;
+use super::input::{CalibrationInput, FlatPixel, Target};
 use super::params::State;
 use crate::optics::station::Station;
 
@@ -141,70 +141,130 @@ pub struct Raw {
     pub flat_map: Vec<Vector2<f64>>,
 }
 
+fn flat_point(state: &State, p: &Vector3<f64>) -> f64 {
+    state.frame.to_world(p).z
+}
+
+fn element_point(state: &State, p: &Vector3<f64>) -> f64 {
+    let e = &state.station.element;
+    e.pose.to_element(&e.pivot(), &state.frame.to_world(p)).z
+}
+
+fn target(state: &State, t: &Target) -> Vector2<f64> {
+    state
+        .station
+        .camera
+        .project(&state.frame.to_world(&t.stage_mm))
+        .map_or(Vector2::new(f64::NAN, f64::NAN), |p| p - t.pixel)
+}
+
+fn flat_pixel(state: &State, f: &FlatPixel) -> Vector2<f64> {
+    flat_reflection_uv(&state.station, f.pixel[0], f.pixel[1])
+        .map_or(Vector2::new(f64::NAN, f64::NAN), |p| p - f.screen_px)
+}
+
 /// The raw residuals of the blocks asked for (the others left empty).
 pub fn raw(input: &CalibrationInput, state: &State, blocks: Blocks) -> Raw {
-    let st = &state.station;
-    let nan2 = Vector2::new(f64::NAN, f64::NAN);
     let mut out = Raw::default();
     if blocks.flat_points {
         out.flat_points = input
             .flat_points_stage_mm
             .iter()
-            .map(|p| state.frame.to_world(p).z)
+            .map(|p| flat_point(state, p))
             .collect();
     }
     if blocks.element_points {
-        let c = st.element.pivot();
         out.element_points = input
             .element_points_stage_mm
             .iter()
-            .map(|p| st.element.pose.to_element(&c, &state.frame.to_world(p)).z)
+            .map(|p| element_point(state, p))
             .collect();
     }
     if blocks.targets {
-        out.targets = input
-            .targets
-            .iter()
-            .map(|t| {
-                st.camera
-                    .project(&state.frame.to_world(&t.stage_mm))
-                    .map_or(nan2, |p| p - t.pixel)
-            })
-            .collect();
+        out.targets = input.targets.iter().map(|t| target(state, t)).collect();
     }
     if blocks.flat_map {
         out.flat_map = input
             .flat_screen
             .par_iter()
             .with_min_len(64)
-            .map(|f| {
-                flat_reflection_uv(st, f.pixel[0], f.pixel[1]).map_or(nan2, |p| p - f.screen_px)
-            })
+            .map(|f| flat_pixel(state, f))
             .collect();
     }
     out
 }
 
-/// The whitened residuals of the blocks asked for, in the order flat
-/// points, element points, targets, flat map.
+/// The readings of the blocks asked for, each giving one or two residuals,
+/// in the order flat points, element points, targets, flat map.
+pub fn item_count(input: &CalibrationInput, blocks: Blocks) -> usize {
+    let on = |b: bool, n: usize| if b { n } else { 0 };
+    on(blocks.flat_points, input.flat_points_stage_mm.len())
+        + on(blocks.element_points, input.element_points_stage_mm.len())
+        + on(blocks.targets, input.targets.len())
+        + on(blocks.flat_map, input.flat_screen.len())
+}
+
+/// The whitened residuals of reading `k` ([`item_count`]'s order) and how
+/// many of the two it has.
+pub fn item(
+    input: &CalibrationInput,
+    state: &State,
+    blocks: Blocks,
+    w: &Whitening,
+    k: usize,
+) -> ([f64; 2], usize) {
+    let s = input.stage_std_mm;
+    let mut k = k;
+    let mut take = |on: bool, n: usize| {
+        if !on {
+            return None;
+        }
+        if k < n {
+            Some(k)
+        } else {
+            k -= n;
+            None
+        }
+    };
+    if let Some(i) = take(blocks.flat_points, input.flat_points_stage_mm.len()) {
+        return (
+            [flat_point(state, &input.flat_points_stage_mm[i]) / s, 0.0],
+            1,
+        );
+    }
+    if let Some(i) = take(blocks.element_points, input.element_points_stage_mm.len()) {
+        return (
+            [
+                element_point(state, &input.element_points_stage_mm[i]) / s,
+                0.0,
+            ],
+            1,
+        );
+    }
+    if let Some(i) = take(blocks.targets, input.targets.len()) {
+        let e = w.targets[i] * target(state, &input.targets[i]);
+        return ([e.x, e.y], 2);
+    }
+    if let Some(i) = take(blocks.flat_map, input.flat_screen.len()) {
+        let e = w.flat_map[i] * flat_pixel(state, &input.flat_screen[i]);
+        return ([e.x, e.y], 2);
+    }
+    ([f64::NAN; 2], 0)
+}
+
+/// The whitened residuals of the blocks asked for, in [`item_count`]'s order.
 pub fn whitened(
     input: &CalibrationInput,
     state: &State,
     blocks: Blocks,
     w: &Whitening,
 ) -> Vec<f64> {
-    let r = raw(input, state, blocks);
-    let s = input.stage_std_mm;
-    let mut out = Vec::with_capacity(
-        r.flat_points.len() + r.element_points.len() + 2 * (r.targets.len() + r.flat_map.len()),
-    );
-    out.extend(r.flat_points.iter().map(|z| z / s));
-    out.extend(r.element_points.iter().map(|z| z / s));
-    for (e, l) in r.targets.iter().zip(&w.targets) {
-        out.extend((l * e).iter());
-    }
-    for (e, l) in r.flat_map.iter().zip(&w.flat_map) {
-        out.extend((l * e).iter());
-    }
-    out
+    (0..item_count(input, blocks))
+        .into_par_iter()
+        .with_min_len(64)
+        .flat_map_iter(|k| {
+            let (r, n) = item(input, state, blocks, w, k);
+            r.into_iter().take(n)
+        })
+        .collect()
 }
