@@ -19,8 +19,8 @@ fn session(seed: u64, spec: SessionSpec) -> SimulatedSession {
 }
 
 /// `(estimate − truth)ᵀ C⁻¹ (estimate − truth)` over every parameter the
-/// calibration reports, and their number.
-fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize) {
+/// calibration reports, their number, and each one's `(error / σ)²`.
+fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize, Vec<(String, f64)>) {
     let params: Vec<Param> = cal
         .names
         .iter()
@@ -40,7 +40,10 @@ fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize) {
         .clone()
         .cholesky()
         .expect("the reported covariance is positive definite");
-    (e.dot(&chol.solve(&e)), params.len())
+    let each = (0..params.len())
+        .map(|k| (cal.names[k].clone(), e[k] * e[k] / c[(k, k)]))
+        .collect();
+    (e.dot(&chol.solve(&e)), params.len(), each)
 }
 
 #[test]
@@ -50,15 +53,26 @@ fn errors_follow_the_reported_covariance_over_many_seeds() {
     // count too): the mean of N seeds is k ± √(2k/N). Four of those σ
     // bound it; a covariance 20 % too small or too large (χ² off by 25 %
     // or 30 % of k ≈ 29, i.e. by 7 or more) fails.
+    //
+    // Each parameter alone: its (error / σ)² is χ²(1), whose mean over N
+    // seeds is 1 ± √(2/N) (0.20 at N = 48); with 29 parameters tested at
+    // once, 4.5 of those σ keep a false alarm below 1e-4 and still catch a
+    // σ off by a factor of 1.7 either way (a mean of 3 or 0.35).
     let seeds = 48;
     let mut sum = 0.0;
     let mut k = 0;
+    let mut each: std::collections::BTreeMap<String, (f64, usize)> = Default::default();
     for seed in 0..seeds {
         let sim = session(seed, SessionSpec::default());
         let cal = calibrate(&sim.input).unwrap();
-        let (chi2, n) = chi2_of_errors(&sim, &cal);
+        let (chi2, n, per) = chi2_of_errors(&sim, &cal);
         sum += chi2;
         k = n;
+        for (name, z2) in per {
+            let e = each.entry(name).or_insert((0.0, 0));
+            e.0 += z2;
+            e.1 += 1;
+        }
     }
     let mean = sum / seeds as f64;
     let tol = 4.0 * (2.0 * k as f64 / seeds as f64).sqrt();
@@ -67,6 +81,15 @@ fn errors_follow_the_reported_covariance_over_many_seeds() {
         (mean - k as f64).abs() < tol,
         "mean χ² {mean} against {k} ± {tol}"
     );
+    for (name, (z2, n)) in &each {
+        let m = z2 / *n as f64;
+        let tol = 4.5 * (2.0 / *n as f64).sqrt();
+        println!("{name:<24} mean (error/σ)² {m:.2} over {n} seeds");
+        assert!(
+            (m - 1.0).abs() < tol,
+            "{name}: mean (error/σ)² {m} over {n} seeds (±{tol:.2})"
+        );
+    }
 }
 
 #[test]
