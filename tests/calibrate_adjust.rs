@@ -170,6 +170,13 @@ fn what_the_data_cannot_determine_is_held_and_reported() {
             "{name} not held: {held:?}"
         );
     }
+    // The cover glass shifts a landing by t (tan θ − tan θ_g) ≈ t (1 − 1/n)
+    // tan θ: to first order in θ a move of the screen along its normal; at
+    // the flat's ≤ 15° the rest is far below its 0.1 mm prior's effect.
+    assert!(
+        held.contains(&"screen.cover_glass.thickness_mm".to_string()),
+        "{held:?}"
+    );
     // k3 moves a corner of this sensor (r² ≈ 0.036) by k3 r⁷ F ≈ 0.04 px
     // per unit: below the 0.05 px centroids at the 0.5 prior range.
     assert!(held.contains(&"camera.k3".to_string()), "{held:?}");

@@ -124,7 +124,10 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         targets: false,
         flat_map: true,
     };
-    let screen_params: Vec<Param> = dofs_of("screen.");
+    let mut screen_params: Vec<Param> = dofs_of("screen.");
+    if input.nominal.screen.cover_glass.is_some() {
+        screen_params.push(Param::CoverGlassThickness);
+    }
     let screen = adjust(
         input,
         camera.state.clone(),
@@ -134,6 +137,9 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
     )?;
     let mut all = vec![Param::PlaneHeight, Param::PlaneSlopeX, Param::PlaneSlopeY];
     all.extend(STATION_DOFS.iter().map(|d| Param::Station(d.dof)));
+    if input.nominal.screen.cover_glass.is_some() {
+        all.push(Param::CoverGlassThickness);
+    }
     let joint = adjust(input, screen.state.clone(), &all, Blocks::ALL, "joint")?;
     let steps = vec![
         StepReport::new("resection", input, &camera, resection_blocks()),
@@ -180,10 +186,10 @@ fn dofs_of(prefix: &str) -> Vec<Param> {
 
 impl Calibration {
     /// The covariance over the station's degrees of freedom alone (the
-    /// plane's marginalised out), with their names.
+    /// plane's and the cover glass's marginalised out), with their names.
     pub fn station_covariance(&self) -> (Vec<String>, DMatrix<f64>) {
         let keep: Vec<usize> = (0..self.names.len())
-            .filter(|&i| !self.names[i].starts_with("frame."))
+            .filter(|&i| Dof::parse(&self.names[i]).is_some())
             .collect();
         let m = DMatrix::from_fn(keep.len(), keep.len(), |i, j| {
             self.covariance[(keep[i], keep[j])]

@@ -20,6 +20,10 @@ pub enum Param {
     PlaneSlopeY,
     /// A station degree of freedom of `mfd-station-uncertainty/1`.
     Station(Dof),
+    /// The screen's cover-glass thickness, mm: estimated where the flat's
+    /// rays determine it, but not a degree of freedom of the uncertainty
+    /// file (its covariance is marginalised out there, like the plane's).
+    CoverGlassThickness,
 }
 
 /// What the adjustment knows of a station degree of freedom before any
@@ -89,6 +93,12 @@ pub const STATION_DOFS: [DofPrior; 26] = [
 /// Finite-difference steps of the plane's parameters: height (mm) and slopes.
 const PLANE_STEPS: [f64; 3] = [1e-5, 1e-8, 1e-8];
 
+/// The cover glass's thickness: difference step and prior range, mm (a
+/// display's datasheet gives its front glass to a tenth of a millimetre).
+const COVER_GLASS_STEP_MM: f64 = 1e-5;
+/// See [`COVER_GLASS_STEP_MM`].
+pub const COVER_GLASS_PRIOR_MM: f64 = 0.1;
+
 /// The prior of a station DOF (`None` for the thickness and the index,
 /// which a calibration takes as given).
 pub fn prior(dof: Dof) -> Option<&'static DofPrior> {
@@ -103,6 +113,7 @@ impl Param {
             Param::PlaneSlopeX => "frame.slope_x",
             Param::PlaneSlopeY => "frame.slope_y",
             Param::Station(d) => d.name(),
+            Param::CoverGlassThickness => "screen.cover_glass.thickness_mm",
         }
     }
 
@@ -113,6 +124,7 @@ impl Param {
             "frame.height_mm" => Some(Param::PlaneHeight),
             "frame.slope_x" => Some(Param::PlaneSlopeX),
             "frame.slope_y" => Some(Param::PlaneSlopeY),
+            "screen.cover_glass.thickness_mm" => Some(Param::CoverGlassThickness),
             _ => Dof::parse(name)
                 .and_then(prior)
                 .map(|d| Param::Station(d.dof)),
@@ -126,6 +138,7 @@ impl Param {
             Param::PlaneSlopeX => PLANE_STEPS[1],
             Param::PlaneSlopeY => PLANE_STEPS[2],
             Param::Station(d) => prior(*d).map_or(1e-6, |p| p.step),
+            Param::CoverGlassThickness => COVER_GLASS_STEP_MM,
         }
     }
 
@@ -134,6 +147,7 @@ impl Param {
     pub fn prior_std(&self) -> Option<f64> {
         match self {
             Param::Station(d) => prior(*d).map(|p| p.prior_std),
+            Param::CoverGlassThickness => Some(COVER_GLASS_PRIOR_MM),
             _ => None,
         }
     }
@@ -216,6 +230,11 @@ impl State {
             Param::PlaneSlopeX => s.frame.plane[1] += delta,
             Param::PlaneSlopeY => s.frame.plane[2] += delta,
             Param::Station(d) => s.station = s.station.perturbed(d, delta),
+            Param::CoverGlassThickness => {
+                if let Some(g) = &mut s.station.screen.cover_glass {
+                    g.thickness_mm += delta;
+                }
+            }
         }
         s
     }
@@ -274,6 +293,10 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
             Param::PlaneHeight => to.frame.plane[0] - from.frame.plane[0],
             Param::PlaneSlopeX => to.frame.plane[1] - from.frame.plane[1],
             Param::PlaneSlopeY => to.frame.plane[2] - from.frame.plane[2],
+            Param::CoverGlassThickness => {
+                let t = |s: &State| s.station.screen.cover_glass.map_or(0.0, |g| g.thickness_mm);
+                t(to) - t(from)
+            }
             Param::Station(d) => match d {
                 Dof::CameraX => to.station.camera.position_mm.x - from.station.camera.position_mm.x,
                 Dof::CameraY => to.station.camera.position_mm.y - from.station.camera.position_mm.y,
@@ -358,10 +381,15 @@ mod tests {
     #[test]
     fn difference_reads_back_every_change() {
         let from = state();
-        let params: Vec<Param> = [Param::PlaneHeight, Param::PlaneSlopeX, Param::PlaneSlopeY]
-            .into_iter()
-            .chain(STATION_DOFS.iter().map(|d| Param::Station(d.dof)))
-            .collect();
+        let params: Vec<Param> = [
+            Param::PlaneHeight,
+            Param::PlaneSlopeX,
+            Param::PlaneSlopeY,
+            Param::CoverGlassThickness,
+        ]
+        .into_iter()
+        .chain(STATION_DOFS.iter().map(|d| Param::Station(d.dof)))
+        .collect();
         for (k, p) in params.iter().enumerate() {
             // A change of ten difference steps: small, far above rounding.
             let delta = 10.0 * p.step();

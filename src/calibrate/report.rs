@@ -148,8 +148,9 @@ impl Report {
         }
         if input.nominal.screen.cover_glass.is_some() {
             notes.push(
-                "the screen's cover glass is taken from the nominal station (not a degree of \
-                 freedom of mfd-station-uncertainty/1)"
+                "the screen's cover-glass index is taken from the nominal station; its \
+                 thickness is estimated where the flat's rays determine it, but it is not a \
+                 degree of freedom of mfd-station-uncertainty/1 and its σ is in report.json only"
                     .into(),
             );
         }

@@ -16,7 +16,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use super::SimError;
 use crate::calibrate::input::{CalibrationInput, FlatPixel, Target};
-use crate::calibrate::params::{prior, WorldFrame};
+use crate::calibrate::params::{prior, WorldFrame, COVER_GLASS_PRIOR_MM};
 use crate::calibrate::session_file::{
     ReferenceFlat, SessionElement, SessionFile, StagePoint, TargetPoint, SESSION_FORMAT,
 };
@@ -222,6 +222,10 @@ fn nominal(truth: &Station, rng: &mut Xoshiro256PlusPlus) -> Station {
     });
     s.element.pose.offset_mm.z = 0.0;
     s.element.pose.tilt_deg = [0.0; 2];
+    // The cover glass's thickness from a datasheet, off by its prior range.
+    if let Some(g) = &mut s.screen.cover_glass {
+        g.thickness_mm += gauss(rng, COVER_GLASS_PRIOR_MM);
+    }
     s
 }
 
