@@ -266,6 +266,15 @@ fn bad_sessions_name_the_entry() {
         "{err}"
     );
     assert!(err.to_string().contains("two or more heights"));
+    let mut bad_cov = sim.input.clone();
+    bad_cov.flat_screen[3].screen_cov_px2 = nalgebra::Matrix2::zeros();
+    assert!(matches!(
+        calibrate(&bad_cov),
+        Err(CalibrationError::BadCovariance {
+            entry: "reference_flat",
+            index: 3
+        })
+    ));
     let mut five = sim.input.clone();
     five.targets.truncate(5);
     assert!(matches!(

@@ -310,12 +310,7 @@ pub fn adjust(
     blocks: Blocks,
     step: &'static str,
 ) -> Result<Adjusted, CalibrationError> {
-    let whitening = Whitening::at(input, &start).ok_or_else(|| CalibrationError::NotConverged {
-        step,
-        trials: 0,
-        stop: "a target lies behind the nominal camera or a covariance is not positive definite"
-            .into(),
-    })?;
+    let whitening = Whitening::at(input, &start)?;
     let all = Problem {
         input,
         params: candidates,

@@ -25,7 +25,7 @@ pub enum CalibrationError {
         problem: String,
     },
     /// A covariance given with an entry is not positive definite.
-    #[error("session: `{entry}` {index}: its covariance is not positive definite")]
+    #[error("session: `{entry}` {index}: its covariance is not positive definite: check its noise figures")]
     BadCovariance {
         /// The session entry.
         entry: &'static str,

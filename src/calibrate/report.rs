@@ -90,7 +90,7 @@ impl StepReport {
     /// The figures of one adjusted step over its blocks.
     pub fn new(name: &'static str, input: &CalibrationInput, a: &Adjusted, blocks: Blocks) -> Self {
         let r = raw(input, &a.state, blocks);
-        let w = Whitening::at(input, &a.state);
+        let w = Whitening::at(input, &a.state).ok();
         let s_um = input.stage_std_mm * 1000.0;
         let mut out = Vec::new();
         for (on, bname, v) in [

@@ -10,6 +10,7 @@
 use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Unit, Vector2, Vector3};
 use rayon::prelude::*;
 
+use super::error::CalibrationError;
 use super::input::{CalibrationInput, FlatPixel, Target};
 use super::params::State;
 use crate::optics::station::Station;
@@ -73,25 +74,44 @@ pub fn projection_jacobian(station: &Station, p: &Point3<f64>) -> Option<Matrix2
 
 impl Whitening {
     /// The whitening at `state`: each target's centroid covariance plus the
-    /// stage's isotropic noise through the projection there. `None` when a
-    /// target is behind the camera or a covariance is not positive definite.
-    pub fn at(input: &CalibrationInput, state: &State) -> Option<Whitening> {
+    /// stage's isotropic noise through the projection there.
+    ///
+    /// # Errors
+    /// [`CalibrationError::Degenerate`] for a target behind the camera,
+    /// [`CalibrationError::BadCovariance`] for a covariance that is not
+    /// positive definite.
+    pub fn at(input: &CalibrationInput, state: &State) -> Result<Whitening, CalibrationError> {
         let s2 = input.stage_std_mm * input.stage_std_mm;
         let targets = input
             .targets
             .iter()
-            .map(|t| {
+            .enumerate()
+            .map(|(index, t)| {
                 let w = state.frame.to_world(&t.stage_mm);
-                let j = projection_jacobian(&state.station, &w)?;
-                whitener(&(t.pixel_cov_px2 + s2 * j * j.transpose()))
+                let j = projection_jacobian(&state.station, &w).ok_or_else(|| CalibrationError::Degenerate {
+                    entry: "target_point",
+                    problem: format!(
+                        "{index} lies behind the camera: check its stage reading against the nominal station"
+                    ),
+                })?;
+                whitener(&(t.pixel_cov_px2 + s2 * j * j.transpose())).ok_or(CalibrationError::BadCovariance {
+                    entry: "target_point",
+                    index,
+                })
             })
-            .collect::<Option<Vec<_>>>()?;
+            .collect::<Result<Vec<_>, _>>()?;
         let flat_map = input
             .flat_screen
             .iter()
-            .map(|f| whitener(&f.screen_cov_px2))
-            .collect::<Option<Vec<_>>>()?;
-        Some(Whitening { targets, flat_map })
+            .enumerate()
+            .map(|(index, f)| {
+                whitener(&f.screen_cov_px2).ok_or(CalibrationError::BadCovariance {
+                    entry: "reference_flat",
+                    index,
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Whitening { targets, flat_map })
     }
 }
 
@@ -250,21 +270,4 @@ pub fn item(
         return ([e.x, e.y], 2);
     }
     ([f64::NAN; 2], 0)
-}
-
-/// The whitened residuals of the blocks asked for, in [`item_count`]'s order.
-pub fn whitened(
-    input: &CalibrationInput,
-    state: &State,
-    blocks: Blocks,
-    w: &Whitening,
-) -> Vec<f64> {
-    (0..item_count(input, blocks))
-        .into_par_iter()
-        .with_min_len(64)
-        .flat_map_iter(|k| {
-            let (r, n) = item(input, state, blocks, w, k);
-            r.into_iter().take(n)
-        })
-        .collect()
 }
