@@ -38,6 +38,8 @@ enum Command {
     Tradeoff(cli::tradeoff::TradeoffArgs),
     /// Fringe display: list monitors, show one pattern fullscreen, or render one offscreen.
     Display(cli::display::DisplayArgs),
+    /// Calibration sessions: template, target positions, check, capture.
+    Calibrate(cli::calibrate::CalibrateArgs),
 }
 
 /// The library's diagnostics (`log`) on stderr: warnings and errors with
@@ -87,6 +89,7 @@ fn main() -> std::process::ExitCode {
         Command::Tradeoff(args) => cli::tradeoff::run(&args),
         Command::Display(args) => cli::display::run(&args),
         Command::Measure(args) => cli::measure::run(&args),
+        Command::Calibrate(args) => cli::calibrate::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

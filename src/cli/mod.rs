@@ -1,6 +1,7 @@
 //! Subcommands of the `mfd` binary.
 
 pub mod bench;
+pub mod calibrate;
 pub mod compare;
 pub mod display;
 pub mod measure;

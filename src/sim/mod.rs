@@ -4,7 +4,8 @@
 //! with injected [`SimFaults`]), what the simulated screen shows
 //! ([`ScreenState`], [`SimDisplay`], [`MirroredDisplay`]), the frame feed of
 //! the fake GigE Vision camera ([`GigeFeed`]), seeded random scenes
-//! ([`RandomSurfaceSpec`]), and [`simulate`], which writes a whole
+//! ([`RandomSurfaceSpec`]), a point target for calibration sessions
+//! ([`SpotScene`], [`SpotCamera`]), and [`simulate`], which writes a whole
 //! acquisition folder with its truth.
 //!
 //! Arrows point down: this module uses `acquire` (the camera trait, the
@@ -18,6 +19,7 @@ mod render;
 mod scene;
 mod screen;
 pub mod session;
+mod target;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -27,6 +29,7 @@ pub use gige_feed::{Filled, GigeFeed};
 pub use render::{Renderer, SimParams};
 pub use scene::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
+pub use target::{render_spot, SpotCamera, SpotScene};
 
 use crate::acquire::acquisition::{
     AcquisitionError, AcquisitionWriter, FrameImage, FrameInfo, FrameLayout,
