@@ -1,17 +1,17 @@
 //! The camera by resection: a linear start by the direct linear transform
-//! (DLT, Hartley's normalised form) from at least six world points and
-//! their centroids, decomposed into position, rotation, focal length and
+//! ([`super::dlt::dlt`]) from at least six world points and their
+//! centroids, decomposed into position, rotation, focal length and
 //! principal point; then the weighted least squares over those and the
 //! distortion ([`super::adjust::adjust`] over the camera's degrees of
 //! freedom against the targets alone).
 //!
-//! Hand-written: the DLT is a 12-unknown null vector and an RQ
-//! decomposition, a few lines over nalgebra's SVD and QR; no crate in the
-//! stack does camera resection.
+//! Hand-written: the decomposition is an RQ of a 3×3 over nalgebra's QR;
+//! no crate in the stack does camera resection.
 
-use nalgebra::{DMatrix, Matrix3, Matrix3x4, Point2, Point3, Rotation3, Vector3};
+use nalgebra::{Matrix3, Matrix3x4, Point2, Point3, Rotation3, Vector3};
 
 use super::adjust::{adjust, Adjusted};
+use super::dlt::dlt;
 use super::error::CalibrationError;
 use super::input::CalibrationInput;
 use super::params::{Param, State, STATION_DOFS};
@@ -28,59 +28,6 @@ pub fn camera_params() -> Vec<Param> {
         .filter(|d| d.dof.name().starts_with("camera."))
         .map(|d| Param::Station(d.dof))
         .collect()
-}
-
-/// A similarity `T` taking points to zero mean and RMS distance `√dim`.
-fn normaliser<const D: usize>(pts: &[[f64; D]]) -> ([f64; D], f64) {
-    let n = pts.len() as f64;
-    let mut mean = [0.0; D];
-    for p in pts {
-        for k in 0..D {
-            mean[k] += p[k] / n;
-        }
-    }
-    let rms = (pts
-        .iter()
-        .map(|p| (0..D).map(|k| (p[k] - mean[k]).powi(2)).sum::<f64>())
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    (mean, (D as f64).sqrt() / rms.max(f64::MIN_POSITIVE))
-}
-
-/// The 3×4 projection matrix (pixel ∝ P [X; 1]) by normalised DLT.
-pub fn dlt(world: &[Point3<f64>], pixels: &[Point2<f64>]) -> Option<Matrix3x4<f64>> {
-    let n = world.len();
-    if n < MIN_TARGETS || pixels.len() != n {
-        return None;
-    }
-    let w: Vec<[f64; 3]> = world.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let x: Vec<[f64; 2]> = pixels.iter().map(|p| [p.x, p.y]).collect();
-    let (wm, ws) = normaliser(&w);
-    let (xm, xs) = normaliser(&x);
-    let mut a = DMatrix::zeros(2 * n, 12);
-    for k in 0..n {
-        let xw = [0, 1, 2].map(|c| (w[k][c] - wm[c]) * ws);
-        let hom = [xw[0], xw[1], xw[2], 1.0];
-        let (u, v) = ((x[k][0] - xm[0]) * xs, (x[k][1] - xm[1]) * xs);
-        for c in 0..4 {
-            a[(2 * k, c)] = hom[c];
-            a[(2 * k, 8 + c)] = -u * hom[c];
-            a[(2 * k + 1, 4 + c)] = hom[c];
-            a[(2 * k + 1, 8 + c)] = -v * hom[c];
-        }
-    }
-    let svd = (a.transpose() * &a).symmetric_eigen();
-    let (imin, _) = svd.eigenvalues.argmin();
-    let p = svd.eigenvectors.column(imin);
-    let pn = Matrix3x4::from_fn(|r, c| p[4 * r + c]);
-    let t_x = Matrix3::new(xs, 0.0, -xs * xm[0], 0.0, xs, -xs * xm[1], 0.0, 0.0, 1.0);
-    let mut t_w = nalgebra::Matrix4::identity() * ws;
-    t_w[(3, 3)] = 1.0;
-    for c in 0..3 {
-        t_w[(c, 3)] = -ws * wm[c];
-    }
-    t_x.try_inverse().map(|ti| ti * pn * t_w)
 }
 
 /// A pinhole read off a projection matrix.
