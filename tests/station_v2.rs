@@ -196,8 +196,15 @@ fn the_whole_chain_honours_version_2_noise_free() {
     let cov = r.maps.screen_cov();
     let obs =
         Observations::from_maps(&station, &r.maps.screen_coords(), Uncertainty::Cov(&cov)).unwrap();
-    let sol = reconstruct(&obs, &station, &SurfaceOptions { terms: Some(36), ..Default::default() })
-        .unwrap();
+    let sol = reconstruct(
+        &obs,
+        &station,
+        &SurfaceOptions {
+            terms: Some(36),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let (front, back) = RandomSurfaceSpec::default()
         .draw_pair(25.5, [0.0, 0.0], 21)
         .unwrap();

@@ -20,12 +20,28 @@
 //!   world points and their pixels).
 //! - [`check`]: everything missing or wrong in a session in progress, in
 //!   the operator's words.
+//! - [`input`]: [`input::CalibrationInput`], a session as the adjustment
+//!   reads it (numbers in the stage frame).
+//! - [`params`], [`residuals`], [`adjust`], [`resect`]: the unknowns (the
+//!   frame's plane, the station's degrees of freedom), the residual blocks
+//!   each against its own noise, one weighted adjustment with the choice of
+//!   what to estimate, the camera by resection.
+//! - [`calibration`]: [`calibration::calibrate`], the single entry point
+//!   (resection, screen, joint adjustment), and what it writes; [`report`].
 
+pub mod adjust;
+pub mod calibration;
 pub mod centroid;
 pub mod check;
 pub mod dlt;
+pub mod error;
 pub mod frame;
+pub mod input;
 pub mod make;
+pub mod params;
+pub mod report;
+pub mod resect;
+pub mod residuals;
 mod rules;
 pub mod session;
 pub mod session_file;

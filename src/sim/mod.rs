@@ -20,6 +20,7 @@ mod phase;
 mod render;
 mod scene;
 mod screen;
+pub mod session;
 mod target;
 
 use std::path::{Path, PathBuf};
@@ -62,6 +63,9 @@ pub enum SimError {
     /// Writing the station copy failed.
     #[error(transparent)]
     Station(#[from] StationError),
+    /// Writing a target frame failed.
+    #[error(transparent)]
+    Image(#[from] crate::formats::image_io::ImageError),
     /// Writing the truth surfaces failed.
     #[error(transparent)]
     Surfaces(#[from] SurfacesFileError),

@@ -1,0 +1,426 @@
+//! One weighted least-squares adjustment over a chosen set of the
+//! calibration's unknowns ([`super::params::Param`]) and residual blocks
+//! ([`Blocks`]), on the shared Levenberg–Marquardt loop
+//! ([`crate::kernels::lm`]): the resection, the screen from the flat and the
+//! joint adjustment are all this function with different sets.
+//!
+//! Before it moves anything it chooses what to estimate: a parameter that
+//! the weighted normal matrix does not determine better than its prior
+//! range (a degeneracy, or data too weak) is held at its nominal value,
+//! worst first, one at a time, and the condition numbers of the
+//! correlation-scaled normal matrix are kept for the report. The result's
+//! covariance is the inverse normal matrix over the estimated parameters,
+//! plus what the held ones' prior σ does to them through their
+//! correlation (the "consider" covariance), so that it covers the error of
+//! every parameter, held or estimated.
+//!
+//! The Jacobian is by central differences: the residuals go through the
+//! distortion's Newton inverse and the cover glass's refraction, whose
+//! analytic derivatives would be as long as the rest of the module, and the
+//! problem is small (tens of parameters).
+
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::error::CalibrationError;
+use super::input::CalibrationInput;
+use super::params::{Param, State};
+use super::residuals::{item, item_count, Blocks, Whitening};
+use crate::kernels::lm::{minimise, Damping, LeastSquares, Linearisation};
+
+/// The schedule: the calibration starts within millimetres and tenths of a
+/// degree of its optimum on a nearly linear problem (the targets' and the
+/// flat's residuals are smooth in every parameter), so Gauss–Newton is
+/// right from the first step and damping only guards against a poor
+/// nominal station; each evaluation is cheap, so every step is evaluated.
+const DAMPING: Damping = Damping {
+    start: 1e-4,
+    up: 10.0,
+    down: 10.0,
+    floor: 1e-12,
+    cap: 1e10,
+    trust_prediction_below: None,
+};
+
+/// Trial steps allowed per adjustment.
+const MAX_TRIALS: usize = 200;
+
+/// A cost decrease below this (χ² units) is no progress: a thousandth of
+/// the χ² a single residual contributes.
+const COST_TOLERANCE: f64 = 1e-3;
+
+/// The normal equations of the whitened residuals at one point.
+#[derive(Debug, Clone)]
+pub struct Normal {
+    cost: f64,
+    jtj: DMatrix<f64>,
+    jtr: DVector<f64>,
+    /// Number of residuals.
+    pub residuals: usize,
+}
+
+impl Linearisation for Normal {
+    fn cost(&self) -> f64 {
+        self.cost
+    }
+    fn jtj(&self) -> &DMatrix<f64> {
+        &self.jtj
+    }
+    fn jtr(&self) -> &DVector<f64> {
+        &self.jtr
+    }
+}
+
+struct Problem<'a> {
+    input: &'a CalibrationInput,
+    params: &'a [Param],
+    blocks: Blocks,
+    whitening: &'a Whitening,
+}
+
+impl LeastSquares for Problem<'_> {
+    type Params = State;
+    type Normal = Normal;
+    type Error = std::convert::Infallible;
+
+    /// Accumulates `JᵀJ`, `Jᵀr` and the cost reading by reading (each one's
+    /// rows from the base state and the states shifted by ± each
+    /// parameter's step), so that a flat map of every camera pixel needs no
+    /// Jacobian in memory.
+    fn evaluate(&self, p: &State) -> Normal {
+        let n = self.params.len();
+        let shifted: Vec<(State, State, f64)> = self
+            .params
+            .iter()
+            .map(|q| {
+                (
+                    p.perturbed(*q, q.step()),
+                    p.perturbed(*q, -q.step()),
+                    q.step(),
+                )
+            })
+            .collect();
+        let (input, blocks, w) = (self.input, self.blocks, self.whitening);
+        let zero = || (DMatrix::zeros(n, n), DVector::zeros(n), 0.0, 0usize);
+        let (jtj, jtr, cost, residuals) = (0..item_count(input, blocks))
+            .into_par_iter()
+            .with_min_len(16)
+            .fold(zero, |(mut a, mut g, mut c, mut m), k| {
+                let (r0, len) = item(input, p, blocks, w, k);
+                let mut rows = DMatrix::zeros(len, n);
+                for (col, (plus, minus, h)) in shifted.iter().enumerate() {
+                    let (rp, _) = item(input, plus, blocks, w, k);
+                    let (rm, _) = item(input, minus, blocks, w, k);
+                    for row in 0..len {
+                        rows[(row, col)] = (rp[row] - rm[row]) / (2.0 * h);
+                    }
+                }
+                let r = DVector::from_column_slice(&r0[..len]);
+                a += rows.transpose() * &rows;
+                g -= rows.transpose() * &r;
+                c += r.norm_squared();
+                m += len;
+                (a, g, c, m)
+            })
+            .reduce(zero, |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2, x.3 + y.3));
+        Normal {
+            cost: if cost.is_finite() {
+                cost
+            } else {
+                f64::INFINITY
+            },
+            jtj,
+            jtr,
+            residuals,
+        }
+    }
+
+    fn moved(&self, p: &State, step: &DVector<f64>) -> Result<State, Self::Error> {
+        Ok(self
+            .params
+            .iter()
+            .zip(step.iter())
+            .fold(p.clone(), |s, (param, d)| s.perturbed(*param, *d)))
+    }
+
+    fn small_step(&self, step: &DVector<f64>) -> bool {
+        // A thousandth of each parameter's difference step: far below any σ.
+        self.params
+            .iter()
+            .zip(step.iter())
+            .all(|(p, d)| d.abs() <= 1e-3 * p.step())
+    }
+
+    fn decrease_tolerance(&self, _at: &Normal) -> Option<f64> {
+        Some(COST_TOLERANCE)
+    }
+}
+
+/// A parameter held at its nominal value, and why.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Held {
+    /// Its name.
+    pub name: String,
+    /// Its marginal σ from the data and its prior range together (at most
+    /// the prior range; near it: the data add nothing).
+    pub marginal_std: f64,
+    /// Its prior range, the σ it is held with.
+    pub prior_std: f64,
+    /// Condition number of the scaled normal matrix before holding it.
+    pub condition_before: f64,
+}
+
+/// What one adjustment estimated and held.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Selection {
+    /// Estimated parameters, by name.
+    pub estimated: Vec<String>,
+    /// Held parameters.
+    pub held: Vec<Held>,
+    /// Condition number of the scaled normal matrix over every candidate.
+    pub condition_all: f64,
+    /// Condition number over the estimated ones.
+    pub condition_estimated: f64,
+}
+
+/// Condition number of a normal matrix in its correlation-scaled form
+/// (infinite where a parameter has no column at all).
+fn condition(n: &DMatrix<f64>) -> f64 {
+    let dim = n.nrows();
+    let d: Vec<f64> = (0..dim).map(|i| n[(i, i)].max(0.0).sqrt()).collect();
+    if d.contains(&0.0) {
+        return f64::INFINITY;
+    }
+    let c = DMatrix::from_fn(dim, dim, |i, j| n[(i, j)] / (d[i] * d[j]));
+    let eig = c.symmetric_eigenvalues();
+    let (max, min) = (eig.max(), eig.min());
+    if min > 0.0 {
+        max / min
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Each parameter's marginal σ once its prior range is added to the data
+/// (`N + diag(1/prior²)`, the plane's parameters without prior): finite
+/// even along a degeneracy, where the parameter's σ is its prior's and its
+/// partners' follow from it. `None` when even so the matrix is singular.
+fn posterior_std(n: &DMatrix<f64>, priors: &[Option<f64>]) -> Option<Vec<f64>> {
+    let dim = n.nrows();
+    let mut m = n.clone();
+    for (i, p) in priors.iter().enumerate() {
+        if let Some(p) = p {
+            m[(i, i)] += 1.0 / (p * p);
+        }
+    }
+    let d: Vec<f64> = (0..dim)
+        .map(|i| m[(i, i)].max(f64::MIN_POSITIVE).sqrt())
+        .collect();
+    let c = DMatrix::from_fn(dim, dim, |i, j| m[(i, j)] / (d[i] * d[j]));
+    let inv = c.cholesky()?.inverse();
+    Some((0..dim).map(|i| inv[(i, i)].sqrt() / d[i]).collect())
+}
+
+fn submatrix(n: &DMatrix<f64>, rows: &[usize], cols: &[usize]) -> DMatrix<f64> {
+    DMatrix::from_fn(rows.len(), cols.len(), |i, j| n[(rows[i], cols[j])])
+}
+
+/// A parameter is held when, with its prior range added, the data leave
+/// its σ above `1/√2` of that range: the data alone know it no better than
+/// the prior does (`1/σ² = 1/σ_data² + 1/prior²`).
+const HOLD_RATIO: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+/// Holds, one at a time and worst first, each parameter that the data do
+/// not determine better than its prior range ([`HOLD_RATIO`]).
+pub fn select(n: &DMatrix<f64>, params: &[Param]) -> (Vec<usize>, Selection) {
+    let mut active: Vec<usize> = (0..params.len()).collect();
+    let mut held = Vec::new();
+    let condition_all = condition(n);
+    loop {
+        let sub = submatrix(n, &active, &active);
+        let cond = condition(&sub);
+        let priors: Vec<Option<f64>> = active.iter().map(|&i| params[i].prior_std()).collect();
+        let sigma =
+            posterior_std(&sub, &priors).unwrap_or_else(|| vec![f64::INFINITY; active.len()]);
+        let worst = active
+            .iter()
+            .enumerate()
+            .filter_map(|(k, _)| priors[k].map(|p| (k, sigma[k], p)))
+            .max_by(|a, b| (a.1 / a.2).total_cmp(&(b.1 / b.2)));
+        match worst {
+            Some((k, s, p)) if s > HOLD_RATIO * p => {
+                let i = active.remove(k);
+                log::info!(
+                    "calibration: holding {} (σ {s:.3e} against prior {p:.3e})",
+                    params[i].name()
+                );
+                held.push(Held {
+                    name: params[i].name().to_string(),
+                    marginal_std: s,
+                    prior_std: p,
+                    condition_before: cond,
+                });
+            }
+            _ => {
+                let selection = Selection {
+                    estimated: active
+                        .iter()
+                        .map(|&i| params[i].name().to_string())
+                        .collect(),
+                    held,
+                    condition_all,
+                    condition_estimated: cond,
+                };
+                return (active, selection);
+            }
+        }
+    }
+}
+
+/// What one adjustment ends with.
+#[derive(Debug, Clone)]
+pub struct Adjusted {
+    /// The adjusted state.
+    pub state: State,
+    /// What was estimated and held.
+    pub selection: Selection,
+    /// Every candidate parameter, estimated first, then held.
+    pub params: Vec<Param>,
+    /// Covariance over `params` (consider covariance for the held ones).
+    pub covariance: DMatrix<f64>,
+    /// χ² at the end.
+    pub chi2: f64,
+    /// Residuals minus estimated parameters.
+    pub dof: usize,
+    /// Trial steps evaluated.
+    pub trials: usize,
+}
+
+/// Adjusts `start` over the parameters of `candidates` that the data
+/// determine, against the residual `blocks`, with the whitening fixed at
+/// `start`.
+///
+/// # Errors
+/// [`CalibrationError::NotConverged`] naming `step`.
+pub fn adjust(
+    input: &CalibrationInput,
+    start: State,
+    candidates: &[Param],
+    blocks: Blocks,
+    step: &'static str,
+) -> Result<Adjusted, CalibrationError> {
+    let whitening = Whitening::at(input, &start)?;
+    let all = Problem {
+        input,
+        params: candidates,
+        blocks,
+        whitening: &whitening,
+    };
+    let (keep, selection) = select(all.evaluate(&start).jtj(), candidates);
+    let estimated: Vec<Param> = keep.iter().map(|&i| candidates[i]).collect();
+    let problem = Problem {
+        params: &estimated,
+        ..all
+    };
+    let at = problem.evaluate(&start);
+    let Ok(out) = minimise(&problem, start, at, &DAMPING, MAX_TRIALS);
+    if !out.stop.converged() {
+        return Err(CalibrationError::NotConverged {
+            step,
+            trials: out.trials,
+            stop: format!("{:?}", out.stop),
+        });
+    }
+    let held: Vec<Param> = (0..candidates.len())
+        .filter(|i| !keep.contains(i))
+        .map(|i| candidates[i])
+        .collect();
+    let params: Vec<Param> = estimated.iter().chain(&held).copied().collect();
+    let full = Problem {
+        params: &params,
+        ..problem
+    }
+    .evaluate(&out.params);
+    let covariance = consider_covariance(full.jtj(), estimated.len(), &held).ok_or_else(|| {
+        CalibrationError::NotConverged {
+            step,
+            trials: out.trials,
+            stop: "the normal matrix of the estimated parameters is singular".into(),
+        }
+    })?;
+    Ok(Adjusted {
+        state: out.params,
+        selection,
+        params,
+        covariance,
+        chi2: full.cost(),
+        dof: full.residuals.saturating_sub(estimated.len()),
+        trials: out.trials,
+    })
+}
+
+/// `[[N⁻¹ + S Σ Sᵀ, −S Σ], [−Σ Sᵀ, Σ]]` with `S = N_ee⁻¹ N_eh` and `Σ`
+/// the held parameters' prior variances: the estimated parameters' error
+/// from noise and from the held ones being off by their prior σ.
+fn consider_covariance(n: &DMatrix<f64>, n_est: usize, held: &[Param]) -> Option<DMatrix<f64>> {
+    let total = n.nrows();
+    let e: Vec<usize> = (0..n_est).collect();
+    let h: Vec<usize> = (n_est..total).collect();
+    let inv = submatrix(n, &e, &e).cholesky()?.inverse();
+    let s = &inv * submatrix(n, &e, &h);
+    let sigma = DMatrix::from_diagonal(&DVector::from_iterator(
+        held.len(),
+        held.iter().map(|p| p.prior_std().unwrap_or(0.0).powi(2)),
+    ));
+    let cov_ee = &inv + &s * &sigma * s.transpose();
+    let cov_eh = -(&s * &sigma);
+    let mut c = DMatrix::zeros(total, total);
+    c.view_mut((0, 0), (n_est, n_est)).copy_from(&cov_ee);
+    c.view_mut((0, n_est), (n_est, held.len()))
+        .copy_from(&cov_eh);
+    c.view_mut((n_est, 0), (held.len(), n_est))
+        .copy_from(&cov_eh.transpose());
+    c.view_mut((n_est, n_est), (held.len(), held.len()))
+        .copy_from(&sigma);
+    Some(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::station::Dof;
+
+    #[test]
+    fn a_degenerate_pair_holds_the_one_with_the_narrow_prior() {
+        // Two parameters seen only through their sum (a pitch and a distance
+        // that scale together): the one whose prior is narrow is held, the
+        // other is then determined through it.
+        let j = DMatrix::from_row_slice(3, 3, &[1.0, 1.0, 0.0, 2.0, 2.0, 0.0, 0.0, 0.0, 1.0]);
+        let n = j.transpose() * &j;
+        let params = [
+            Param::Station(Dof::ScreenZ),
+            Param::Station(Dof::ScreenPitch),
+            Param::Station(Dof::CameraX),
+        ];
+        let (keep, sel) = select(&n, &params);
+        assert_eq!(keep, vec![0, 2]);
+        assert_eq!(sel.held.len(), 1);
+        assert_eq!(sel.held[0].name, "screen.pixel_pitch_mm");
+        assert!(sel.condition_all.is_infinite() || sel.condition_all > 1e12);
+        assert!(sel.condition_estimated < 10.0);
+    }
+
+    #[test]
+    fn the_consider_covariance_adds_the_held_parameters_effect() {
+        // y = a + b with b held at σ_b: a's σ² is 1/N_aa + σ_b² and a, b
+        // are anticorrelated by exactly −σ_b².
+        let n = DMatrix::from_row_slice(2, 2, &[4.0, 4.0, 4.0, 4.0]);
+        let held = [Param::Station(Dof::ScreenPitch)];
+        let c = consider_covariance(&n, 1, &held).unwrap();
+        let s2 = 2.7e-5_f64.powi(2);
+        assert!((c[(0, 0)] - (0.25 + s2)).abs() < 1e-15);
+        assert!((c[(0, 1)] + s2).abs() < 1e-20);
+        assert!((c[(1, 1)] - s2).abs() < 1e-20);
+    }
+}

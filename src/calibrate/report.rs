@@ -1,0 +1,196 @@
+//! The calibration's report: each step's residuals by block against the
+//! noise each block expects, χ²/dof, what was held and why, with the
+//! normal matrix's condition numbers. Serialised to `report.json` and
+//! printed as a short summary for the operator.
+
+use nalgebra::Matrix2;
+use serde::Serialize;
+
+use super::adjust::{Adjusted, Selection};
+use super::input::CalibrationInput;
+use super::residuals::{raw, Blocks, Whitening};
+
+/// One residual block's figures at the end of a step.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BlockReport {
+    /// `flat_points`, `element_points`, `targets` or `flat_map`.
+    pub name: &'static str,
+    /// The unit of the RMS figures.
+    pub unit: &'static str,
+    /// Residual count (readings, or 2-D points).
+    pub count: usize,
+    /// RMS residual (per coordinate).
+    pub rms: f64,
+    /// RMS the block's noise alone would give (per coordinate).
+    pub expected_rms: f64,
+    /// χ² of the block's whitened residuals.
+    pub chi2: f64,
+}
+
+/// One step of the calibration.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StepReport {
+    /// `resection`, `screen` or `joint`.
+    pub name: &'static str,
+    /// Trial steps of its least squares.
+    pub trials: usize,
+    /// χ² at its end.
+    pub chi2: f64,
+    /// Residuals minus estimated parameters.
+    pub dof: usize,
+    /// `chi2 / dof` (≈ 1 when the model and the stated noise hold).
+    pub chi2_per_dof: f64,
+    /// What it estimated and held.
+    pub selection: Selection,
+    /// Its residual blocks.
+    pub blocks: Vec<BlockReport>,
+}
+
+/// The whole report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// The steps, in order.
+    pub steps: Vec<StepReport>,
+    /// What the calibration takes as given or could not determine, in words.
+    pub notes: Vec<String>,
+}
+
+fn rms(values: impl Iterator<Item = f64>) -> (f64, usize) {
+    let (mut s, mut n) = (0.0, 0);
+    for v in values {
+        s += v * v;
+        n += 1;
+    }
+    (if n > 0 { (s / n as f64).sqrt() } else { 0.0 }, n)
+}
+
+fn block_2d(
+    name: &'static str,
+    unit: &'static str,
+    e: &[nalgebra::Vector2<f64>],
+    w: &[Matrix2<f64>],
+) -> BlockReport {
+    let (r, _) = rms(e.iter().flat_map(|v| [v.x, v.y]));
+    let var: f64 = w
+        .iter()
+        .map(|l| l.try_inverse().map_or(f64::NAN, |c| c.norm_squared() / 2.0))
+        .sum::<f64>();
+    let chi2 = e.iter().zip(w).map(|(v, l)| (l * v).norm_squared()).sum();
+    BlockReport {
+        name,
+        unit,
+        count: e.len(),
+        rms: r,
+        expected_rms: (var / e.len().max(1) as f64).sqrt(),
+        chi2,
+    }
+}
+
+impl StepReport {
+    /// The figures of one adjusted step over its blocks.
+    pub fn new(name: &'static str, input: &CalibrationInput, a: &Adjusted, blocks: Blocks) -> Self {
+        let r = raw(input, &a.state, blocks);
+        let w = Whitening::at(input, &a.state).ok();
+        let s_um = input.stage_std_mm * 1000.0;
+        let mut out = Vec::new();
+        for (on, bname, v) in [
+            (blocks.flat_points, "flat_points", &r.flat_points),
+            (blocks.element_points, "element_points", &r.element_points),
+        ] {
+            if on && !v.is_empty() {
+                let (x, n) = rms(v.iter().map(|z| z * 1000.0));
+                out.push(BlockReport {
+                    name: bname,
+                    unit: "um",
+                    count: n,
+                    rms: x,
+                    expected_rms: s_um,
+                    chi2: v.iter().map(|z| (z * 1000.0 / s_um).powi(2)).sum(),
+                });
+            }
+        }
+        if let Some(w) = &w {
+            if blocks.targets {
+                out.push(block_2d("targets", "px", &r.targets, &w.targets));
+            }
+            if blocks.flat_map {
+                out.push(block_2d("flat_map", "screen px", &r.flat_map, &w.flat_map));
+            }
+        }
+        StepReport {
+            name,
+            trials: a.trials,
+            chi2: a.chi2,
+            dof: a.dof,
+            chi2_per_dof: a.chi2 / a.dof.max(1) as f64,
+            selection: a.selection.clone(),
+            blocks: out,
+        }
+    }
+}
+
+impl Report {
+    /// The report of a calibration's steps, with the notes the session implies.
+    pub fn new(input: &CalibrationInput, steps: Vec<StepReport>) -> Self {
+        let mut notes = vec![format!(
+            "element thickness {} ± {} mm and index {} ± {} taken from the session as given",
+            input.thickness_mm.0,
+            input.thickness_mm.1,
+            input.refractive_index.0,
+            input.refractive_index.1
+        )];
+        if input.element_points_stage_mm.is_empty() {
+            notes.push(
+                "no element points: the element is taken to stand on the reference plane, its \
+                 height and tilts held with the σ placing it where the flat stood leaves open"
+                    .into(),
+            );
+        }
+        if input.nominal.screen.cover_glass.is_some() {
+            notes.push(
+                "the screen's cover-glass index is taken from the nominal station; its \
+                 thickness is estimated where the flat's rays determine it, but it is not a \
+                 degree of freedom of mfd-station-uncertainty/1 and its σ is in report.json only"
+                    .into(),
+            );
+        }
+        Report { steps, notes }
+    }
+
+    /// `report.json`.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// A short summary for the operator.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        for step in &self.steps {
+            s += &format!(
+                "{:<10} χ²/dof {:.2} ({} dof, {} trials, condition {:.1e})\n",
+                step.name,
+                step.chi2_per_dof,
+                step.dof,
+                step.trials,
+                step.selection.condition_estimated
+            );
+            for b in &step.blocks {
+                s += &format!(
+                    "  {:<15} {:>6} × RMS {:.4} {} (noise alone: {:.4})\n",
+                    b.name, b.count, b.rms, b.unit, b.expected_rms
+                );
+            }
+            for h in &step.selection.held {
+                s += &format!(
+                    "  held {} at its nominal value: the data leave σ {:.3e} of its prior {:.3e} \
+                     (condition {:.1e})\n",
+                    h.name, h.marginal_std, h.prior_std, h.condition_before
+                );
+            }
+        }
+        for n in &self.notes {
+            s += &format!("note: {n}\n");
+        }
+        s
+    }
+}
