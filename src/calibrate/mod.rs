@@ -36,6 +36,7 @@ pub mod check;
 pub mod dlt;
 pub mod error;
 pub mod frame;
+pub mod from_session;
 pub mod input;
 pub mod make;
 pub mod params;

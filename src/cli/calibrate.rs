@@ -1,5 +1,6 @@
 //! `mfd calibrate`: making and checking a calibration session
-//! (`mfd-calibration/1`): `template`, `targets`, `check`, `capture`.
+//! (`mfd-calibration/1`): `template`, `targets`, `check`, `capture`, and `solve` / `simulate`
+//! (in `calibrate_solve`).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -33,6 +34,10 @@ enum CalibrateCommand {
     Check(CheckArgs),
     /// Grab one target frame from a camera into the session and append its entry.
     Capture(CaptureArgs),
+    /// Solve a session: DIR/station.toml (mfd-station/2), station_uncertainty.toml, report.json.
+    Solve(super::calibrate_solve::SolveArgs),
+    /// Write a whole simulated session (targets, flat points, reference flat) with its truth.
+    Simulate(super::calibrate_solve::SimulateArgs),
 }
 
 /// Arguments of `mfd calibrate template`.
@@ -111,6 +116,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         CalibrateCommand::Targets(a) => targets(a),
         CalibrateCommand::Check(a) => run_check(a),
         CalibrateCommand::Capture(a) => capture(a),
+        CalibrateCommand::Solve(a) => super::calibrate_solve::solve(a),
+        CalibrateCommand::Simulate(a) => super::calibrate_solve::simulate(a),
     }
 }
 

@@ -69,12 +69,21 @@ fn compare_surfaces(ours: &Path, truth: &Path, summary: Option<&Path>) -> anyhow
         };
         let err = rms_difference_nm(x, y);
         print!("{name} surface: RMS error {err:.4} nm over the aperture (piston and tilt removed), {} terms", x.len());
-        if let Some(u) = reported
+        // Noise and station together where the summary has the station's part.
+        let total = reported
             .as_ref()
-            .and_then(|r| r[name]["error_rms_nm"].as_f64())
-        {
+            .and_then(|r| r["station"][name]["total_rms_nm"].as_f64());
+        let noise = reported
+            .as_ref()
+            .and_then(|r| r[name]["error_rms_nm"].as_f64());
+        if let Some(u) = total.or(noise) {
+            let what = if total.is_some() {
+                " (noise and station)"
+            } else {
+                ""
+            };
             print!(
-                "; reported uncertainty {u:.4} nm (error/uncertainty {:.2})",
+                "; reported uncertainty{what} {u:.4} nm (error/uncertainty {:.2})",
                 err / u
             );
         }

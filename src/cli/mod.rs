@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod calibrate;
+pub mod calibrate_solve;
 pub mod compare;
 pub mod display;
 pub mod measure;

@@ -121,7 +121,11 @@ fn print_surfaces(stage: &SurfaceStage) {
                 )
             })
             .collect();
-        println!("  station: largest shares {}", top.join(", "));
+        println!(
+            "  station: largest single shares (each alone at one σ; their correlations are in \
+             the total) {}",
+            top.join(", ")
+        );
     }
     let iters: Vec<String> = sol
         .stages

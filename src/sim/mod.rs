@@ -21,6 +21,7 @@ mod render;
 mod scene;
 mod screen;
 pub mod session;
+pub mod session_flat;
 mod target;
 
 use std::path::{Path, PathBuf};
