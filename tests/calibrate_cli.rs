@@ -56,6 +56,11 @@ fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
         "2",
     ]);
     println!("{printed}");
+    for picture in ["targets.png", "flat_residuals.png"] {
+        let file = std::io::BufReader::new(std::fs::File::open(cal.join(picture)).unwrap());
+        let info = png::Decoder::new(file).read_info().unwrap();
+        assert!(info.info().width >= 400, "{picture}");
+    }
     let station = Station::load(&cal.join("station.toml")).unwrap();
     assert!(station.needs_version_2());
     let unc = StationUncertainty::load(&cal.join("station_uncertainty.toml")).unwrap();

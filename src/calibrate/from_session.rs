@@ -31,7 +31,7 @@ pub const TWO_REFLECTION_SHARE: f64 = 0.05;
 /// The most flat pixels handed to the adjustment: every one carries
 /// independent information, but the screen's six degrees of freedom are
 /// determined long before; beyond this the pixels are taken on a regular
-/// stride over the sensor.
+/// grid over the sensor (every s-th pixel of every s-th row).
 pub const MAX_FLAT_PIXELS: usize = 20_000;
 
 /// Why a session could not be turned into a calibration.
@@ -114,6 +114,8 @@ pub struct SolvedSession {
     /// Targets whose centroid was given (`image_px`, σ assumed
     /// [`GIVEN_CENTROID_STD_PX`]).
     pub given_centroids: usize,
+    /// The numbers the calibration was computed from (for its pictures).
+    pub input: CalibrationInput,
 }
 
 /// The nominal station to decode the flat on: the flat stands on the
@@ -199,8 +201,15 @@ pub fn decode_flat(
     if pixels.len() < 100 {
         return Err(SessionSolveError::FlatTooSmall { path, decoded });
     }
-    let stride = pixels.len().div_ceil(MAX_FLAT_PIXELS);
-    let used: Vec<FlatPixel> = pixels.into_iter().step_by(stride).collect();
+    // Every s-th pixel of every s-th row: a regular grid over the flat.
+    let s = (pixels.len() as f64 / MAX_FLAT_PIXELS as f64)
+        .sqrt()
+        .ceil()
+        .max(1.0) as u32;
+    let used: Vec<FlatPixel> = pixels
+        .into_iter()
+        .filter(|p| p.pixel[0] % s == 0 && p.pixel[1] % s == 0)
+        .collect();
     let info = FlatDecode {
         path,
         frames,
@@ -238,7 +247,7 @@ pub fn solve_session(
     let (flat_screen, flat) = decode_flat(&session, config)?;
     let v = |p: &nalgebra::Point3<f64>| -> Vector3<f64> { p.coords };
     let e = &session.element;
-    let input = CalibrationInput {
+    let mut input = CalibrationInput {
         nominal: session.nominal.clone(),
         stage_std_mm: session.stage_std_mm,
         element_center_stage_mm: e.center_stage_mm,
@@ -269,6 +278,7 @@ pub fn solve_session(
             t.pixel_cov_px2 *= ratio;
         }
         calibration = calibrate(&scaled)?;
+        input = scaled;
         calibration.report.notes.push(format!(
             "the target centroids' σ were scaled by √{ratio:.2} = {:.2}: the first resection's \
              χ²/dof over {dof} degrees of freedom (a centroid's σ from the frame's background \
@@ -280,5 +290,6 @@ pub fn solve_session(
         calibration,
         flat,
         given_centroids: given,
+        input,
     })
 }

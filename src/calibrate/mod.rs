@@ -40,6 +40,7 @@ pub mod from_session;
 pub mod input;
 pub mod make;
 pub mod params;
+pub mod pictures;
 pub mod report;
 pub mod resect;
 pub mod residuals;

@@ -18,7 +18,9 @@ pub struct SolveArgs {
     /// The session folder (or its session.toml).
     session: PathBuf,
     /// Where to write station.toml (mfd-station/2), station_uncertainty.toml
-    /// (mfd-station-uncertainty/1) and report.json.
+    /// (mfd-station-uncertainty/1), report.json and the pictures
+    /// (targets.png: each target's reprojection residual; flat_residuals.png:
+    /// the reference flat's fringe-map residual over the sensor).
     #[arg(long)]
     out: PathBuf,
     /// How the reference flat's acquisition is decoded (its display's gamma
@@ -47,8 +49,10 @@ pub fn solve(args: &SolveArgs) -> anyhow::Result<()> {
         .calibration
         .write(&args.out)
         .with_context(|| format!("writing the calibration into {}", args.out.display()))?;
+    mfd::calibrate::pictures::write_pictures(&solved.calibration, &solved.input, &args.out)?;
     println!(
-        "wrote {}/station.toml, station_uncertainty.toml, report.json; measure with \
+        "wrote {}/station.toml, station_uncertainty.toml, report.json, targets.png, \
+         flat_residuals.png; measure with \
          `mfd reconstruct ACQ --station {0}/station.toml --uncertainty {0}/station_uncertainty.toml`",
         args.out.display()
     );

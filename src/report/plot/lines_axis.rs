@@ -92,6 +92,10 @@ impl AxisRange {
             let decades = (self.hi / self.lo).log10();
             font::log_tick_label(v, decades < 1.0 + EXP_EDGE)
         } else {
+            // A tick reached by adding steps carries their rounding: one at
+            // 1e-12 of the span from zero is zero (a label "-1.6e-17" is noise).
+            let span = (self.hi - self.lo).abs();
+            let v = if v.abs() <= 1e-12 * span { 0.0 } else { v };
             font::tick_label(v)
         }
     }
