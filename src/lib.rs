@@ -24,6 +24,8 @@
 //! - [`solve`]: the spectral stage and the surface solvers.
 //! - [`pipeline`]: the stages as one call, `reconstruct(input, station,
 //!   options)`, and the result folder it writes.
+//! - [`budget`]: the error budget — every degree of freedom's effect on
+//!   every Zernike term, the noise, the total, what the data pin down.
 //! - [`report`]: what a result tells its reader (`summary.json`, pictures,
 //!   figures of merit against a truth).
 //! - [`formats`]: NPY, PNG/TIFF frames, `surfaces.json`.
@@ -33,6 +35,7 @@
 #![warn(missing_docs)]
 
 pub mod acquire;
+pub mod budget;
 pub mod calibrate;
 pub mod conventions;
 pub mod formats;
