@@ -61,8 +61,57 @@ pub fn with_station(obs: &Observations, station: &Station) -> Observations {
     out
 }
 
-/// Re-solves `obs` on `station` changed by one σ of every degree of freedom
-/// of `uncertainty`, with the base solution's numbers of terms fixed.
+/// Each degree of freedom's change of the coefficients per σ (front,
+/// back; all the base solution's terms), `None` where its σ is 0.
+pub type Columns = Vec<Option<(Vec<f64>, Vec<f64>)>>;
+
+/// Re-solves `obs` on `station` changed by one σ of every degree of
+/// freedom of `uncertainty`, with the base solution's numbers of terms
+/// fixed: the change of every coefficient per σ, in `uncertainty.names` order.
+///
+/// # Errors
+/// [`SurfaceError`] when a changed station's solve fails.
+pub fn station_induced_columns(
+    obs: &Observations,
+    station: &Station,
+    uncertainty: &StationUncertainty,
+    base: &SurfaceSolution,
+    opts: &SurfaceOptions,
+) -> Result<Columns, SurfaceError> {
+    let (nf, nb) = (
+        base.front.coefficients_nm().len(),
+        base.back.coefficients_nm().len(),
+    );
+    let fixed = SurfaceOptions {
+        terms: Some(nf.max(nb)),
+        ..opts.clone()
+    };
+    let reference = reconstruct(obs, station, &fixed)?;
+    let diff = |a: &[f64], b: &[f64], n: usize| -> Vec<f64> {
+        (0..n)
+            .map(|i| a.get(i).copied().unwrap_or(0.0) - b.get(i).copied().unwrap_or(0.0))
+            .collect()
+    };
+    let mut out = Vec::new();
+    for (k, &dof) in uncertainty.names.iter().enumerate() {
+        let sigma = uncertainty.covariance[(k, k)].sqrt();
+        if sigma == 0.0 {
+            out.push(None);
+            continue;
+        }
+        let changed = station.perturbed(dof, sigma);
+        let sol = reconstruct(&with_station(obs, &changed), &changed, &fixed)?;
+        let f = &reference.front;
+        let df = diff(sol.front.coefficients_nm(), f.coefficients_nm(), nf);
+        let b = &reference.back;
+        let db = diff(sol.back.coefficients_nm(), b.coefficients_nm(), nb);
+        out.push(Some((df, db)));
+    }
+    Ok(out)
+}
+
+/// The station-induced covariance from [`station_induced_columns`]: each
+/// column's `J Σ Jᵀ`, and each degree of freedom's share.
 ///
 /// # Errors
 /// [`SurfaceError`] when a changed station's solve fails.
@@ -77,11 +126,7 @@ pub fn station_induced(
         base.front.coefficients_nm().len(),
         base.back.coefficients_nm().len(),
     );
-    let fixed = SurfaceOptions {
-        terms: Some(nf.max(nb)),
-        ..opts.clone()
-    };
-    let reference = reconstruct(obs, station, &fixed)?;
+    let columns = station_induced_columns(obs, station, uncertainty, base, opts)?;
     let m = uncertainty.names.len();
     let mut jf = DMatrix::zeros(nf, m);
     let mut jb = DMatrix::zeros(nb, m);
@@ -89,34 +134,15 @@ pub fn station_induced(
     let sigmas: Vec<f64> = (0..m)
         .map(|k| uncertainty.covariance[(k, k)].sqrt())
         .collect();
-    for (k, &dof) in uncertainty.names.iter().enumerate() {
-        if sigmas[k] == 0.0 {
-            continue;
-        }
-        let changed = station.perturbed(dof, sigmas[k]);
-        let sol = reconstruct(&with_station(obs, &changed), &changed, &fixed)?;
-        let diff = |a: &[f64], b: &[f64], n: usize| -> Vec<f64> {
-            (0..n)
-                .map(|i| a.get(i).copied().unwrap_or(0.0) - b.get(i).copied().unwrap_or(0.0))
-                .collect()
-        };
-        let df = diff(
-            sol.front.coefficients_nm(),
-            reference.front.coefficients_nm(),
-            nf,
-        );
-        let db = diff(
-            sol.back.coefficients_nm(),
-            reference.back.coefficients_nm(),
-            nb,
-        );
-        jf.column_mut(k).copy_from_slice(&df);
-        jb.column_mut(k).copy_from_slice(&db);
+    for (k, col) in columns.iter().enumerate() {
+        let Some((df, db)) = col else { continue };
+        jf.column_mut(k).copy_from_slice(df);
+        jb.column_mut(k).copy_from_slice(db);
         shares.push(DofShare {
-            dof,
+            dof: uncertainty.names[k],
             std: sigmas[k],
-            front_rms_nm: rms_from(&df),
-            back_rms_nm: rms_from(&db),
+            front_rms_nm: rms_from(df),
+            back_rms_nm: rms_from(db),
         });
     }
     // The station's correlation: its covariance with unit σ (J is per σ).
