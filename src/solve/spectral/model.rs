@@ -72,6 +72,28 @@ pub struct Design {
     pub directions_deg: Vec<f64>,
 }
 
+impl Design {
+    /// The screen point `(u, v)` whose fringe coordinate along each
+    /// direction is `mus[d]`: least squares of `a_d u + b_d v = μ_d − c_d`
+    /// over the directions; `None` when the directions do not span the plane.
+    pub fn screen_point(&self, mus: &[f64]) -> Option<[f64; 2]> {
+        let (mut saa, mut sab, mut sbb, mut sar, mut sbr) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (ax, &mu) in self.axes.iter().zip(mus) {
+            let r = mu - ax.c;
+            saa += ax.a * ax.a;
+            sab += ax.a * ax.b;
+            sbb += ax.b * ax.b;
+            sar += ax.a * r;
+            sbr += ax.b * r;
+        }
+        let det = saa * sbb - sab * sab;
+        if det.abs() < 1e-12 * (saa * sbb).max(1e-300) {
+            return None;
+        }
+        Some([(sbb * sar - sab * sbr) / det, (saa * sbr - sab * sar) / det])
+    }
+}
+
 /// Model parameters for K reflections.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {

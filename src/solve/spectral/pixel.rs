@@ -56,24 +56,6 @@ pub struct PixelContext<'a> {
     pub max_iter: usize,
 }
 
-fn solve_centre(ctx: &PixelContext, mus: &[f64]) -> Option<[f64; 2]> {
-    // Least squares of a_d u + b_d v = μ_d − c_d over the directions.
-    let (mut saa, mut sab, mut sbb, mut sar, mut sbr) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (ax, &mu) in ctx.design.axes.iter().zip(mus) {
-        let r = mu - ax.c;
-        saa += ax.a * ax.a;
-        sab += ax.a * ax.b;
-        sbb += ax.b * ax.b;
-        sar += ax.a * r;
-        sbr += ax.b * r;
-    }
-    let det = saa * sbb - sab * sab;
-    if det.abs() < 1e-12 * (saa * sbb).max(1e-300) {
-        return None;
-    }
-    Some([(sbb * sar - sab * sbr) / det, (saa * sbr - sab * sar) / det])
-}
-
 fn start(k: usize, uv: &[[f64; 2]], kappa: f64) -> Params {
     let mut p = Params {
         k,
@@ -122,10 +104,14 @@ fn pair_start<S: Samples + ?Sized>(
         }
         pair_mu[dir] = best.1;
     }
-    let s1 =
-        solve_centre(ctx, &pair_mu.iter().map(|m| m[0]).collect::<Vec<_>>()).unwrap_or_default();
-    let s2 =
-        solve_centre(ctx, &pair_mu.iter().map(|m| m[1]).collect::<Vec<_>>()).unwrap_or_default();
+    let s1 = ctx
+        .design
+        .screen_point(&pair_mu.iter().map(|m| m[0]).collect::<Vec<_>>())
+        .unwrap_or_default();
+    let s2 = ctx
+        .design
+        .screen_point(&pair_mu.iter().map(|m| m[1]).collect::<Vec<_>>())
+        .unwrap_or_default();
     start(2, &[s1, s2], kappa)
 }
 
@@ -361,7 +347,7 @@ fn searched_fits<S: Samples + ?Sized>(
             }
         }
     }
-    let Some(centre) = solve_centre(ctx, &mus) else {
+    let Some(centre) = ctx.design.screen_point(&mus) else {
         base.flags |= PixelFlags::NO_DATA;
         return None;
     };

@@ -136,7 +136,7 @@ fn first_pass(model: &PhaseModel, s: &PixelSamples, settings: PhaseSettings) -> 
         .map(|d| unwrap_direction(sched, d, &phases))
         .collect::<Option<_>>()?;
     let mus: Vec<f64> = unwrapped.iter().map(|u| u.s).collect();
-    let uv = centre(model, &mus)?;
+    let uv = model.design.screen_point(&mus)?;
     let ones = vec![1.0; s.index.len()];
     let kappa = if model.fits_kappa() {
         settings.kappa0
@@ -157,25 +157,6 @@ fn first_pass(model: &PhaseModel, s: &PixelSamples, settings: PhaseSettings) -> 
         fit,
         detected,
     })
-}
-
-/// The screen point whose fringe coordinates are `mus` (least squares over
-/// the directions).
-fn centre(model: &PhaseModel, mus: &[f64]) -> Option<[f64; 2]> {
-    let (mut saa, mut sab, mut sbb, mut sar, mut sbr) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (ax, &mu) in model.design.axes.iter().zip(mus) {
-        let r = mu - ax.c;
-        saa += ax.a * ax.a;
-        sab += ax.a * ax.b;
-        sbb += ax.b * ax.b;
-        sar += ax.a * r;
-        sbr += ax.b * r;
-    }
-    let det = saa * sbb - sab * sab;
-    if det.abs() < 1e-12 * (saa * sbb).max(1e-300) {
-        return None;
-    }
-    Some([(sbb * sar - sab * sbr) / det, (saa * sbr - sab * sar) / det])
 }
 
 /// Model values and residuals of frames `index` at `fit`.
