@@ -21,6 +21,10 @@ use nalgebra::DMatrix;
 
 use crate::optics::station::Dof;
 
+pub mod fisher;
+pub mod linear;
+pub mod station_dual;
+
 /// One degree of freedom's row of the budget.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DofEntry {
@@ -37,7 +41,10 @@ pub struct DofEntry {
 impl DofEntry {
     /// The front's change at one σ, nm per coefficient.
     pub fn front_contribution_nm(&self) -> Vec<f64> {
-        self.front_nm_per_unit.iter().map(|s| s * self.std).collect()
+        self.front_nm_per_unit
+            .iter()
+            .map(|s| s * self.std)
+            .collect()
     }
 
     /// The back's change at one σ, nm per coefficient.
