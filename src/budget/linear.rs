@@ -274,6 +274,7 @@ struct Rows {
 impl Rows {
     /// Calls `f` with each pixel's whitened rows `[J X r]` (its `m`
     /// residual components); returns the failed paths.
+    #[allow(clippy::needless_range_loop)]
     fn each(&self, chunk: &[Observation], mut f: impl FnMut(&[Vec<f64>])) -> [usize; 2] {
         let (layout, plate) = (&self.layout, &self.plate);
         let p = layout.columns();
