@@ -1,25 +1,46 @@
 //! The budget of one solution: the sensitivities of its coefficients to the
 //! station's degrees of freedom, the noise covariance, the total.
 //!
-//! This version takes each degree of freedom's sensitivity from a re-solve
-//! of the same observations on the station changed by one σ
-//! ([`station_induced`]), divided by that σ.
+//! The sensitivities come from the reconstruction's linearisation at its
+//! solution: the weighted least-squares fit stops where `JᵀW r(c, θ) = 0`
+//! (`J = ∂uv/∂c`, `r` the screen residuals, `θ` the station the fit
+//! assumes), so a change `δθ` of the assumed station moves the
+//! coefficients by `δc = −A⁻¹ B δθ`, `A = JᵀWJ`, `B = JᵀWX`,
+//! `X = ∂uv/∂θ` (the measured screen points held fixed; the term
+//! `(∂J/∂θ)ᵀ W r`, linear in the residuals, is left out as Gauss–Newton
+//! leaves it out of `A`). `J` and `X` come from one dual trace per path
+//! ([`super::station_dual`]), whitened by the same covariance the solve
+//! used (smoothed as `reconstruct` smooths it, its outliers left out).
+//! [`crate::solve::surfaces::station_error::station_induced_columns`]
+//! (re-solves) stays as the independent check.
 
-use nalgebra::DMatrix;
+use std::collections::HashSet;
 
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+
+use super::station_dual::{StationDual, DOFS, WIDTH};
 use super::{Budget, DofEntry, OtherEntry};
 use crate::optics::station::{Station, StationUncertainty};
-use crate::solve::surfaces::station_error::station_induced_columns;
-use crate::solve::surfaces::{Observations, SurfaceError, SurfaceOptions, SurfaceSolution};
+use crate::optics::trace::Plate;
+use crate::solve::surfaces::path::LOCAL;
+use crate::solve::surfaces::problem::{fill_row, whitener, BasisAt, Layout};
+use crate::solve::surfaces::station_error::{DofShare, StationInduced};
+use crate::solve::surfaces::{
+    Observation, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
+};
 
 /// The name of the imaging-noise entry of [`Budget::others`].
 pub const IMAGING_NOISE: &str = "imaging noise";
 
 /// The budget of `solution` (solved from `obs` on `station`) under the
-/// station's `uncertainty`.
+/// station's `uncertainty`: each degree of freedom's sensitivity from the
+/// linearisation ([`linearise`]), the noise, the total, and what the data
+/// pin down ([`super::fisher`]).
 ///
 /// # Errors
-/// [`SurfaceError`] when a changed station's solve fails.
+/// [`SurfaceError::IllConditioned`] when the normal equations at the
+/// solution are not positive definite.
 pub fn budget(
     obs: &Observations,
     station: &Station,
@@ -27,26 +48,29 @@ pub fn budget(
     solution: &SurfaceSolution,
     opts: &SurfaceOptions,
 ) -> Result<Budget, SurfaceError> {
-    let cols = station_induced_columns(obs, station, uncertainty, solution, opts)?;
+    let lin = linearise(obs, station, solution, opts)?;
+    let per_unit = lin.sensitivity()?;
+    let mut dofs: Vec<DofEntry> = Vec::new();
+    let mut keep = Vec::new();
+    for (k, &dof) in uncertainty.names.iter().enumerate() {
+        let std = uncertainty.covariance[(k, k)].sqrt();
+        if std > 0.0 {
+            let (front, back) = lin.coefficients(&per_unit, dof as usize, solution);
+            keep.push(k);
+            dofs.push(DofEntry {
+                dof,
+                std,
+                front_nm_per_unit: front,
+                back_nm_per_unit: back,
+            });
+        }
+    }
     let nf = solution.front.coefficients_nm().len();
     let nb = if solution.back_fitted {
         solution.back.coefficients_nm().len()
     } else {
         0
     };
-    let mut dofs = Vec::new();
-    let mut keep = Vec::new();
-    for (k, col) in cols.iter().enumerate() {
-        let Some((front, back)) = col else { continue };
-        let std = uncertainty.covariance[(k, k)].sqrt();
-        keep.push(k);
-        dofs.push(DofEntry {
-            dof: uncertainty.names[k],
-            std,
-            front_nm_per_unit: front.iter().map(|x| x / std).collect(),
-            back_nm_per_unit: back.iter().take(nb).map(|x| x / std).collect(),
-        });
-    }
     let correlation = DMatrix::from_fn(keep.len(), keep.len(), |r, c| {
         let (a, b) = (keep[r], keep[c]);
         uncertainty.covariance[(a, b)] / (dofs[r].std * dofs[c].std)
@@ -70,7 +94,7 @@ pub fn budget(
         others: vec![noise],
         front_total_cov_nm2,
         back_total_cov_nm2,
-        identifiability: Vec::new(),
+        identifiability: super::fisher::identifiability(&lin, uncertainty)?,
     })
 }
 
@@ -106,4 +130,360 @@ pub fn noise_covariances(
         pick(nf, &|k| layout.front_col(k)),
         pick(nb, &|k| layout.back_col(k)),
     )
+}
+
+/// The reconstruction's normal equations at its solution, over the
+/// surfaces' free coefficients (`p`, in `layout`'s column order, nm) and
+/// every degree of freedom (`Dof::ALL` order, per its unit), whitened;
+/// and the information on the degrees of freedom with the coefficients
+/// profiled out, computed without the normal equations' cancellation.
+#[derive(Debug, Clone)]
+pub struct Linearisation {
+    /// The solution's unknowns.
+    pub layout: Layout,
+    /// `A = JᵀWJ`, p × p.
+    pub a: DMatrix<f64>,
+    /// `B = JᵀWX`, p × 28.
+    pub b: DMatrix<f64>,
+    /// `C = XᵀWX`, 28 × 28.
+    pub c: DMatrix<f64>,
+    /// `JᵀW r`, the residuals' gradient over the coefficients (≈ 0 at a
+    /// converged solution).
+    pub jr: DVector<f64>,
+    /// `C − BᵀA⁻¹B`, 28 × 28, from a second pass: with `S = A⁻¹B` and
+    /// `X⊥ = X − JS` row by row, `G − HᵀA⁻¹H`, `G = X⊥ᵀWX⊥`,
+    /// `H = JᵀWX⊥` (an identity for any `S`, so `S`'s rounding cancels;
+    /// what is left is the rounding of `X⊥`, not of `C`).
+    pub schur: DMatrix<f64>,
+    /// `Xᵀr − BᵀA⁻¹Jᵀr` the same way: `X⊥ᵀr − HᵀA⁻¹Jᵀr`.
+    pub reduced_gradient: DVector<f64>,
+    /// The rounding floor of `schur` along any direction `u` of the
+    /// degrees of freedom, `Σ u_i² floor_ii`: `floor = 64 ε cond(A) G + (64 ε)²
+    /// cond(A) C` (the solve against `A` loses `ε cond(A)` of `HᵀA⁻¹H ≤ G`;
+    /// forming `X⊥` loses `ε` of `X`, squared in `G`, amplified by `A`).
+    pub schur_floor: DMatrix<f64>,
+    /// The solution's factor on `A⁻¹` (its covariance is `scale · A⁻¹`):
+    /// the noise's information is `· / scale`.
+    pub covariance_scale: f64,
+    /// Residual components that entered.
+    pub n_resid: usize,
+    /// Measured paths the dual trace could not follow (front, back).
+    pub failed: [usize; 2],
+}
+
+/// Accumulates [`Linearisation`] of `solution` (solved from `obs` on
+/// `station`, world frame) on all cores: one dual trace per measured path
+/// (two passes), its rows whitened by the pixel's covariance (smoothed by
+/// `opts.covariance_smoothing_px` as the solve smoothed it), the pixels
+/// the solve rejected left out.
+///
+/// # Errors
+/// [`SurfaceError::IllConditioned`] when `A` is not positive definite.
+pub fn linearise(
+    obs: &Observations,
+    station: &Station,
+    solution: &SurfaceSolution,
+    opts: &SurfaceOptions,
+) -> Result<Linearisation, SurfaceError> {
+    let smoothed;
+    let obs = if opts.covariance_smoothing_px > 0 && obs.sigma_known {
+        smoothed = obs.smoothed_covariance(opts.covariance_smoothing_px);
+        &smoothed
+    } else {
+        obs
+    };
+    let rejected: HashSet<[u32; 2]> = solution.rejected.iter().copied().collect();
+    let pixels: Vec<Observation> = obs
+        .pixels
+        .iter()
+        .filter(|p| !rejected.contains(&p.pixel))
+        .copied()
+        .collect();
+    let layout = solution.layout;
+    let plate = Plate::new(
+        &station.element_frame(),
+        solution.front.clone(),
+        solution.back.clone(),
+        opts.edge_margin_mm,
+    );
+    let rows = Rows {
+        sd: StationDual::new(station),
+        plate,
+        layout,
+    };
+    let p = layout.columns();
+    // The whitened residual rides along as the last column.
+    let n = p + DOFS + 1;
+    let (gram, n_resid, failed) = pixels.par_chunks(128).map(|chunk| rows.gram(chunk)).reduce(
+        || (DMatrix::zeros(n, n), 0, [0; 2]),
+        |(g, r, f), (h, s, e)| (g + h, r + s, [f[0] + e[0], f[1] + e[1]]),
+    );
+    let a = gram.view((0, 0), (p, p)).into_owned();
+    let b = gram.view((0, p), (p, DOFS)).into_owned();
+    let c = gram.view((p, p), (DOFS, DOFS)).into_owned();
+    let jr = gram.view((0, n - 1), (p, 1)).column(0).into_owned();
+    let chol = a.clone().cholesky().ok_or(SurfaceError::IllConditioned {
+        stage: "budget linearisation",
+        condition_number: f64::INFINITY,
+    })?;
+    let s = chol.solve(&b);
+    let (g, h, xr) = pixels
+        .par_chunks(128)
+        .map(|chunk| rows.projected(chunk, &s))
+        .reduce(
+            || {
+                (
+                    DMatrix::zeros(DOFS, DOFS),
+                    DMatrix::zeros(p, DOFS),
+                    DVector::zeros(DOFS),
+                )
+            },
+            |(g, h, x), (g2, h2, x2)| (g + g2, h + h2, x + x2),
+        );
+    let ah = chol.solve(&h);
+    let schur = &g - h.transpose() * &ah;
+    let schur = (&schur + schur.transpose()) * 0.5;
+    let reduced_gradient = xr - ah.transpose() * &jr;
+    let eig = a.clone().symmetric_eigen().eigenvalues;
+    let cond = eig.max() / eig.min().max(f64::MIN_POSITIVE);
+    let e = 64.0 * f64::EPSILON;
+    let schur_floor = &g * (e * cond) + &c * (e * e * cond);
+    Ok(Linearisation {
+        layout,
+        a,
+        b,
+        c,
+        jr,
+        schur,
+        reduced_gradient,
+        schur_floor,
+        covariance_scale: solution.covariance_scale,
+        n_resid,
+        failed,
+    })
+}
+
+/// What one pass over the pixels needs: the station in duals, the plate
+/// at the solution, the unknowns.
+struct Rows {
+    sd: StationDual,
+    plate: Plate,
+    layout: Layout,
+}
+
+impl Rows {
+    /// Calls `f` with each pixel's whitened rows `[J X r]` (its `m`
+    /// residual components); returns the failed paths.
+    #[allow(clippy::needless_range_loop)]
+    fn each(&self, chunk: &[Observation], mut f: impl FnMut(&[Vec<f64>])) -> [usize; 2] {
+        let (layout, plate) = (&self.layout, &self.plate);
+        let p = layout.columns();
+        let n = p + DOFS + 1;
+        let mut at = [
+            BasisAt::new(layout.front_terms),
+            BasisAt::new(layout.back_terms),
+            BasisAt::new(layout.front_terms),
+        ];
+        let mut failed = [0; 2];
+        let mut rows = vec![vec![0.0; n]; 4];
+        for ob in chunk {
+            let mut idx = [0; 4];
+            let mut m = 0;
+            for k in 0..2 {
+                if !ob.has(k) || !(if k == 0 { layout.use_s1 } else { layout.use_s2 }) {
+                    continue;
+                }
+                let Ok(path) = self.sd.path(plate, ob.pixel, k) else {
+                    failed[k] += 1;
+                    continue;
+                };
+                at[0].eval(plate.front.basis(), path.hits[0]);
+                if k == 1 {
+                    at[1].eval(plate.back.basis(), path.hits[1]);
+                    at[2].eval(plate.front.basis(), path.hits[2]);
+                }
+                for c in 0..2 {
+                    idx[m] = 2 * k + c;
+                    let row = &mut rows[m];
+                    fill_row(
+                        &mut row[..p],
+                        &path,
+                        c,
+                        k == 1,
+                        layout,
+                        [&at[0], &at[1], &at[2]],
+                    );
+                    row[p..n - 1].copy_from_slice(&path.uv[c].g[LOCAL..WIDTH]);
+                    row[n - 1] = path.uv[c].v - ob.s[k][c];
+                    m += 1;
+                }
+            }
+            if m == 0 {
+                continue;
+            }
+            let l = whitener(ob, &idx[..m]);
+            let mut x = [0.0; 4];
+            for col in 0..n {
+                for (xi, row) in x.iter_mut().zip(&rows[..m]) {
+                    *xi = row[col];
+                }
+                l.forward_in_place(&mut x[..m]);
+                for (xi, row) in x.iter().zip(&mut rows[..m]) {
+                    row[col] = *xi;
+                }
+            }
+            f(&rows[..m]);
+        }
+        failed
+    }
+
+    /// `[J X r]ᵀ[J X r]` of one chunk, its residual count and failed paths.
+    fn gram(&self, chunk: &[Observation]) -> (DMatrix<f64>, usize, [usize; 2]) {
+        let n = self.layout.columns() + DOFS + 1;
+        let mut cols = DMatrix::<f64>::zeros(n, 4 * chunk.len());
+        let mut r = 0;
+        let failed = self.each(chunk, |rows| {
+            for row in rows {
+                cols.column_mut(r).copy_from_slice(row);
+                r += 1;
+            }
+        });
+        let mut gram = DMatrix::zeros(n, n);
+        if r > 0 {
+            let jt = cols.columns(0, r);
+            gram.gemm(1.0, &jt, &jt.transpose(), 0.0);
+        }
+        (gram, r, failed)
+    }
+
+    /// With `X⊥ = X − J s` row by row: `X⊥ᵀX⊥`, `JᵀX⊥`, `X⊥ᵀr` of one chunk.
+    fn projected(
+        &self,
+        chunk: &[Observation],
+        s: &DMatrix<f64>,
+    ) -> (DMatrix<f64>, DMatrix<f64>, DVector<f64>) {
+        let p = self.layout.columns();
+        let mut g = DMatrix::zeros(DOFS, DOFS);
+        let mut h = DMatrix::zeros(p, DOFS);
+        let mut xr = DVector::zeros(DOFS);
+        self.each(chunk, |rows| {
+            for row in rows {
+                let j = DVector::from_column_slice(&row[..p]);
+                let x = DVector::from_column_slice(&row[p..p + DOFS]);
+                let perp = x - s.tr_mul(&j);
+                g.ger(1.0, &perp, &perp, 1.0);
+                h.ger(1.0, &j, &perp, 1.0);
+                xr.axpy(row[p + DOFS], &perp, 1.0);
+            }
+        });
+        (g, h, xr)
+    }
+}
+
+impl Linearisation {
+    /// `−A⁻¹ B`: every free coefficient's change (nm, column order) per
+    /// unit of every degree of freedom (`Dof::ALL` order).
+    ///
+    /// # Errors
+    /// [`SurfaceError::IllConditioned`] when `A` is not positive definite.
+    pub fn sensitivity(&self) -> Result<DMatrix<f64>, SurfaceError> {
+        let chol = self
+            .a
+            .clone()
+            .cholesky()
+            .ok_or(SurfaceError::IllConditioned {
+                stage: "budget linearisation",
+                condition_number: f64::INFINITY,
+            })?;
+        Ok(-chol.solve(&self.b))
+    }
+
+    /// Column `dof` of `per_unit` (from [`Linearisation::sensitivity`]) in
+    /// coefficient order: (front, back), Noll from j = 1, 0 where fixed;
+    /// the back empty when `solution` did not reconstruct it.
+    pub fn coefficients(
+        &self,
+        per_unit: &DMatrix<f64>,
+        dof: usize,
+        solution: &SurfaceSolution,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let l = &self.layout;
+        let nf = solution.front.coefficients_nm().len();
+        let nb = if solution.back_fitted {
+            solution.back.coefficients_nm().len()
+        } else {
+            0
+        };
+        let pick = |col: Option<usize>| col.map_or(0.0, |c| per_unit[(c, dof)]);
+        (
+            (0..nf).map(|k| pick(l.front_col(k))).collect(),
+            (0..nb).map(|k| pick(l.back_col(k))).collect(),
+        )
+    }
+}
+
+/// [`crate::solve::surfaces::station_error::station_induced`] from the
+/// linearisation: the same struct, each degree of freedom's column its
+/// sensitivity times its σ.
+///
+/// # Errors
+/// As [`budget`].
+pub fn station_induced_linear(
+    obs: &Observations,
+    station: &Station,
+    uncertainty: &StationUncertainty,
+    solution: &SurfaceSolution,
+    opts: &SurfaceOptions,
+) -> Result<StationInduced, SurfaceError> {
+    let lin = linearise(obs, station, solution, opts)?;
+    let per_unit = lin.sensitivity()?;
+    let m = uncertainty.names.len();
+    let sigmas: Vec<f64> = (0..m)
+        .map(|k| uncertainty.covariance[(k, k)].sqrt())
+        .collect();
+    let (nf, nb) = (
+        solution.front.coefficients_nm().len(),
+        solution.back.coefficients_nm().len(),
+    );
+    let mut jf = DMatrix::zeros(nf, m);
+    let mut jb = DMatrix::zeros(nb, m);
+    let mut shares = Vec::new();
+    for (k, &dof) in uncertainty.names.iter().enumerate() {
+        if sigmas[k] == 0.0 {
+            continue;
+        }
+        let (f, b) = lin.coefficients(&per_unit, dof as usize, solution);
+        let df = DVector::from_iterator(nf, f.iter().map(|x| x * sigmas[k]));
+        let db =
+            DVector::from_iterator(nb, (0..nb).map(|i| b.get(i).map_or(0.0, |x| x * sigmas[k])));
+        jf.set_column(k, &df);
+        jb.set_column(k, &db);
+        shares.push(DofShare {
+            dof,
+            std: sigmas[k],
+            front_rms_nm: df.rows_range(3.min(nf)..).norm(),
+            back_rms_nm: db.rows_range(3.min(nb)..).norm(),
+        });
+    }
+    let corr = DMatrix::from_fn(m, m, |r, c| {
+        let s = sigmas[r] * sigmas[c];
+        if s > 0.0 {
+            uncertainty.covariance[(r, c)] / s
+        } else {
+            0.0
+        }
+    });
+    let front_cov_nm2 = &jf * &corr * jf.transpose();
+    let back_cov_nm2 = &jb * &corr * jb.transpose();
+    shares.sort_by(|a, b| {
+        (b.front_rms_nm.hypot(b.back_rms_nm)).total_cmp(&a.front_rms_nm.hypot(a.back_rms_nm))
+    });
+    let from_defocus = |c: &DMatrix<f64>| (3..c.nrows()).map(|k| c[(k, k)]).sum::<f64>().sqrt();
+    Ok(StationInduced {
+        front_rms_nm: from_defocus(&front_cov_nm2),
+        back_rms_nm: from_defocus(&back_cov_nm2),
+        front_cov_nm2,
+        back_cov_nm2,
+        shares,
+    })
 }

@@ -21,6 +21,10 @@ use nalgebra::DMatrix;
 
 use crate::optics::station::Dof;
 
+pub mod fisher;
+pub mod linear;
+pub mod station_dual;
+
 /// One degree of freedom's row of the budget.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DofEntry {

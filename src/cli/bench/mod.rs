@@ -1,5 +1,6 @@
 //! `mfd bench`: benchmarks that print machine-readable figures.
 
+mod budget;
 mod extremes;
 mod surfaces;
 mod thickness;
@@ -50,6 +51,12 @@ enum BenchKind {
     /// incidence 5–35°, 15–231 terms, a back 10 µm out of flat) on the 48×48
     /// station: a markdown table of errors, iterations and outcomes.
     Extremes(extremes::ExtremesArgs),
+    /// The error budget on the full-resolution station: traced screen
+    /// points with noise at the spectral solver's level, the surfaces
+    /// solved, then `budget()` over all 28 degrees of freedom; prints one
+    /// JSON line: solve_s, budget_s (separately), pixels, terms, the
+    /// station-induced RMS of each surface.
+    Budget(budget::BudgetBenchArgs),
 }
 
 #[derive(Args)]
@@ -94,6 +101,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchKind::Thickness(a) => thickness::run(a),
         BenchKind::Surfaces(a) => surfaces::run(a),
         BenchKind::Extremes(a) => extremes::run(a),
+        BenchKind::Budget(a) => budget::run(a),
     }
 }
 

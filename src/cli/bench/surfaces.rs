@@ -62,7 +62,8 @@ pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
     );
     let view = TracedView::trace(&station, &plate);
     let trace_s = t.elapsed().as_secs_f64();
-    let (coords, std) = with_noise(view.screen_coords(), args);
+    let sigma = [args.sigma1_px, args.sigma2_px];
+    let (coords, std) = with_noise(view.screen_coords(), sigma, args.seed);
     let noisy = args.sigma1_px > 0.0 || args.sigma2_px > 0.0;
     let unc = if noisy {
         Uncertainty::Std(&std)
@@ -118,15 +119,15 @@ pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
 
 /// The traced points with Gaussian noise of σ1 on S1's and σ2 on S2's
 /// coordinates (seeded), and those σ per coordinate.
-fn with_noise(mut coords: Vec<f64>, args: &SurfaceBenchArgs) -> (Vec<f64>, Vec<f64>) {
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed.wrapping_add(1000));
+pub(super) fn with_noise(
+    mut coords: Vec<f64>,
+    sigma_px: [f64; 2],
+    seed: u64,
+) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(1000));
     let mut std = vec![0.0; coords.len()];
     for (k, (c, s)) in coords.iter_mut().zip(std.iter_mut()).enumerate() {
-        let sigma = if (k / 2) % 2 == 0 {
-            args.sigma1_px
-        } else {
-            args.sigma2_px
-        };
+        let sigma = sigma_px[(k / 2) % 2];
         let z: f64 = StandardNormal.sample(&mut rng);
         *c += sigma * z;
         *s = sigma;

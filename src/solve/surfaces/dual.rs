@@ -38,6 +38,24 @@ impl<const N: usize> Dual<N> {
         }
     }
 
+    /// Sine (angles in radians).
+    pub fn sin(self) -> Self {
+        let c = self.v.cos();
+        Dual {
+            v: self.v.sin(),
+            g: self.g.map(|x| x * c),
+        }
+    }
+
+    /// Cosine (angles in radians).
+    pub fn cos(self) -> Self {
+        let s = -self.v.sin();
+        Dual {
+            v: self.v.cos(),
+            g: self.g.map(|x| x * s),
+        }
+    }
+
     /// `self · k` for a plain number.
     pub fn scale(self, k: f64) -> Self {
         Dual {
@@ -125,6 +143,35 @@ pub fn scale<const N: usize>(s: Dual<N>, a: &V3<N>) -> V3<N> {
     [s * a[0], s * a[1], s * a[2]]
 }
 
+/// `a × b`.
+pub fn cross<const N: usize>(a: &V3<N>, b: &V3<N>) -> V3<N> {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// A 3 × 3 matrix of duals, row-major.
+pub type M3<const N: usize> = [[Dual<N>; 3]; 3];
+
+/// `m v`.
+pub fn mat_vec<const N: usize>(m: &M3<N>, v: &V3<N>) -> V3<N> {
+    m.map(|row| dot(&row, v))
+}
+
+/// `a b`.
+pub fn mat_mul<const N: usize>(a: &M3<N>, b: &M3<N>) -> M3<N> {
+    std::array::from_fn(|r| {
+        std::array::from_fn(|c| a[r][0] * b[0][c] + a[r][1] * b[1][c] + a[r][2] * b[2][c])
+    })
+}
+
+/// `mᵀ`.
+pub fn transpose<const N: usize>(m: &M3<N>) -> M3<N> {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[c][r]))
+}
+
 /// `a / ‖a‖`.
 pub fn normalize<const N: usize>(a: &V3<N>) -> V3<N> {
     let inv = Dual::c(1.0) / dot(a, a).sqrt();
@@ -148,5 +195,15 @@ mod tests {
         let dy = (fx(x0, y0 + h) - fx(x0, y0 - h)) / (2.0 * h);
         assert!((d.g[0] - dx).abs() < 1e-8 * dx.abs().max(1.0));
         assert!((d.g[1] - dy).abs() < 1e-8 * dy.abs().max(1.0));
+    }
+
+    /// sin and cos: derivatives are the closed forms cos and −sin.
+    #[test]
+    fn trigonometric_derivatives_are_the_closed_forms() {
+        for x0 in [-2.0, 0.3, 1.1] {
+            let (s, c) = (Dual::<1>::param(x0, 0).sin(), Dual::<1>::param(x0, 0).cos());
+            assert_eq!((s.v, s.g[0]), (x0.sin(), x0.cos()));
+            assert_eq!((c.v, c.g[0]), (x0.cos(), -x0.sin()));
+        }
     }
 }

@@ -109,14 +109,14 @@ impl Normal {
 }
 
 /// Basis values and gradients at one point, per surface.
-struct BasisAt {
+pub(crate) struct BasisAt {
     v: Vec<f64>,
     dx: Vec<f64>,
     dy: Vec<f64>,
 }
 
 impl BasisAt {
-    fn new(n: usize) -> Self {
+    pub(crate) fn new(n: usize) -> Self {
         BasisAt {
             v: vec![0.0; n],
             dx: vec![0.0; n],
@@ -124,7 +124,7 @@ impl BasisAt {
         }
     }
 
-    fn eval(&mut self, basis: &ZernikeBasis, xy: [f64; 2]) {
+    pub(crate) fn eval(&mut self, basis: &ZernikeBasis, xy: [f64; 2]) {
         // Lengths match by construction.
         let _ = basis.eval_into(xy[0], xy[1], &mut self.v, &mut self.dx, &mut self.dy);
     }
@@ -132,9 +132,9 @@ impl BasisAt {
 
 /// Adds slot `slot`'s contribution of path `p` (component `c`) to `row`.
 #[allow(clippy::too_many_arguments)]
-fn add_slot(
+pub(crate) fn add_slot<const N: usize>(
     row: &mut [f64],
-    p: &DualPath,
+    p: &DualPath<N>,
     c: usize,
     slot: usize,
     at: &BasisAt,
@@ -238,6 +238,20 @@ pub fn pixel_chi2(
         .collect()
 }
 
+/// The Cholesky factor `L` (`C = LLᵀ`) of the covariance of the residual
+/// components `idx` of `ob` (0–1 S1's u, v; 2–3 S2's); by the standard
+/// deviations alone where that block is not positive definite.
+pub(crate) fn whitener(ob: &Observation, idx: &[usize]) -> SmallCholesky<4> {
+    let m = idx.len();
+    SmallCholesky::<4>::from_fn(m, |i, j| ob.cov[idx[i]][idx[j]]).unwrap_or_else(|| {
+        let mut var = [0.0; 4];
+        for (v, &a) in var.iter_mut().zip(idx) {
+            *v = ob.cov[a][a];
+        }
+        SmallCholesky::diagonal(&var[..m])
+    })
+}
+
 /// Per-pixel work space: basis values at the hits, raw rows and residuals.
 struct Scratch {
     f_in: BasisAt,
@@ -253,15 +267,7 @@ impl Scratch {
     /// covariance of the components present: `L⁻¹(·)`, `C = LLᵀ`; by the
     /// standard deviations alone where that block is not positive definite.
     fn whiten(&mut self, ob: &Observation, m: usize, p: usize) {
-        let idx = &self.idx[..m];
-        let l =
-            SmallCholesky::<4>::from_fn(m, |i, j| ob.cov[idx[i]][idx[j]]).unwrap_or_else(|| {
-                let mut var = [0.0; 4];
-                for (v, &a) in var.iter_mut().zip(idx) {
-                    *v = ob.cov[a][a];
-                }
-                SmallCholesky::diagonal(&var[..m])
-            });
+        let l = whitener(ob, &self.idx[..m]);
         l.forward_in_place(&mut self.res[..m]);
         let mut x = [0.0; 4];
         for c in 0..p {
@@ -337,26 +343,32 @@ impl Scratch {
     /// Row `m` of the Jacobian: component `c` of `path` (a back path when
     /// `back`) over the free coefficients, from the basis values at its hits.
     fn fill_row(&mut self, m: usize, path: &DualPath, c: usize, back: bool, layout: &Layout) {
-        let row = &mut self.rows[m];
-        row.iter_mut().for_each(|x| *x = 0.0);
-        let front_col = |t| layout.front_col(t);
-        if layout.fit_front {
-            add_slot(row, path, c, SLOT_FRONT_IN, &self.f_in, front_col, 1.0);
-        }
-        if back && layout.fit_back {
-            add_slot(
-                row,
-                path,
-                c,
-                SLOT_BACK,
-                &self.bk,
-                |t| layout.back_col(t),
-                1.0,
-            );
-        }
-        if back && layout.fit_front {
-            add_slot(row, path, c, SLOT_FRONT_OUT, &self.f_out, front_col, 1.0);
-        }
+        let at = [&self.f_in, &self.bk, &self.f_out];
+        fill_row(&mut self.rows[m], path, c, back, layout, at);
+    }
+}
+
+/// One row of the Jacobian over `layout`'s free coefficients: component
+/// `c` of `path` (a back path when `back`), from the basis values at its
+/// hits `at` (front entry, back, front exit).
+pub(crate) fn fill_row<const N: usize>(
+    row: &mut [f64],
+    path: &DualPath<N>,
+    c: usize,
+    back: bool,
+    layout: &Layout,
+    at: [&BasisAt; 3],
+) {
+    row.iter_mut().for_each(|x| *x = 0.0);
+    let front_col = |t| layout.front_col(t);
+    if layout.fit_front {
+        add_slot(row, path, c, SLOT_FRONT_IN, at[0], front_col, 1.0);
+    }
+    if back && layout.fit_back {
+        add_slot(row, path, c, SLOT_BACK, at[1], |t| layout.back_col(t), 1.0);
+    }
+    if back && layout.fit_front {
+        add_slot(row, path, c, SLOT_FRONT_OUT, at[2], front_col, 1.0);
     }
 }
 
