@@ -37,7 +37,10 @@ pub struct DofEntry {
 impl DofEntry {
     /// The front's change at one σ, nm per coefficient.
     pub fn front_contribution_nm(&self) -> Vec<f64> {
-        self.front_nm_per_unit.iter().map(|s| s * self.std).collect()
+        self.front_nm_per_unit
+            .iter()
+            .map(|s| s * self.std)
+            .collect()
     }
 
     /// The back's change at one σ, nm per coefficient.
