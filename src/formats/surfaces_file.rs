@@ -205,13 +205,15 @@ impl SurfacesFile {
         let v2 = match raw.format.as_str() {
             SURFACES_FORMAT => false,
             SURFACES_FORMAT_V2 => true,
-            other => return Err(invalid(
-                path,
-                "format",
-                format!(
+            other => {
+                return Err(invalid(
+                    path,
+                    "format",
+                    format!(
                     "expected \"{SURFACES_FORMAT}\" or \"{SURFACES_FORMAT_V2}\", found \"{other}\""
                 ),
-            )),
+                ))
+            }
         };
         check_zernike(&raw.zernike, path)?;
         let file = SurfacesFile {
