@@ -104,6 +104,9 @@ pub fn coefficients(
     Ok(Some(path))
 }
 
+/// A series' legend label and its points (Noll j, σ nm).
+type Labelled = (&'static str, Vec<(f64, f64)>);
+
 /// `DIR/uncertainty_breakdown.png`: per Zernike term j = 4 … min(n, 36) the
 /// 1σ from the imaging noise and from the station's geometry (and both
 /// together), a panel per reconstructed surface, on a logarithmic σ axis.
@@ -130,7 +133,7 @@ pub fn breakdown(out: &Path, summary: &Summary) -> Result<Option<PathBuf>, PlotE
             .collect()
     };
     let mut titles = Vec::new();
-    let mut data: Vec<Vec<(&str, Vec<(f64, f64)>)>> = Vec::new();
+    let mut data: Vec<Vec<Labelled>> = Vec::new();
     for (name, figures, split) in surfaces {
         let Some(f) = figures.filter(|f| f.std_nm.len() > REMOVED_TERMS) else {
             continue;
@@ -141,15 +144,15 @@ pub fn breakdown(out: &Path, summary: &Summary) -> Result<Option<PathBuf>, PlotE
                 series.push(("station geometry", points(&s.station_std_nm)));
                 series.push(("total", points(&s.total_std_nm)));
                 format!(
-                    "{}: expected error {:.2} nm RMS (noise {:.2}, station {:.2})",
+                    "{}: noise {:.2} ⊕ station {:.2} = {:.2} nm RMS",
                     title_case(name),
-                    s.total_rms_nm,
                     s.noise_rms_nm,
-                    s.station_rms_nm
+                    s.station_rms_nm,
+                    s.total_rms_nm
                 )
             }
             None => format!(
-                "{}: noise alone, {:.2} nm RMS; station geometry taken as exact",
+                "{}: noise alone {:.2} nm RMS (geometry taken as exact)",
                 title_case(name),
                 f.error_rms_nm
             ),
