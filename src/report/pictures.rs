@@ -152,7 +152,7 @@ pub fn breakdown(out: &Path, summary: &Summary) -> Result<Option<PathBuf>, PlotE
                 )
             }
             None => format!(
-                "{}: noise alone {:.2} nm RMS (geometry taken as exact)",
+                "{}: noise {:.2} nm RMS; geometry taken as exact",
                 title_case(name),
                 f.error_rms_nm
             ),
