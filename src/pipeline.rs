@@ -15,18 +15,29 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::acquire::acquisition::{Acquisition, AcquisitionError};
+use crate::budget::Budget;
 use crate::formats::npy::{self, NpyError};
-use crate::formats::surfaces_file::{SurfacesFile, SurfacesFileError};
-use crate::optics::station::{Station, StationUncertainty};
+use crate::formats::surfaces_file::{
+    SurfaceCoefficients, SurfaceEntry, SurfacesFile, SurfacesFileError, ZernikeSpec,
+};
+use crate::optics::station::{Station, StationUncertainty, UncertaintyError};
 use crate::report::pictures;
 use crate::report::plot::PlotError;
 use crate::report::summary::Summary;
 use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::report::height_grid;
-use crate::solve::surfaces::station_error::{station_induced, StationInduced};
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
     Uncertainty,
+};
+
+mod linear_budget;
+mod station_uncertainty;
+
+use linear_budget::linear::budget;
+
+pub use station_uncertainty::{
+    find_station_uncertainty, FoundUncertainty, UncertaintySource, STATION_UNCERTAINTY_FILE,
 };
 
 /// Side of the height-map grids written beside `surfaces.json`, pixels.
@@ -70,6 +81,25 @@ pub enum PipelineError {
         /// The cause.
         #[source]
         source: std::io::Error,
+    },
+    /// A station uncertainty file could not be read.
+    #[error(transparent)]
+    Uncertainty(#[from] UncertaintyError),
+    /// A station uncertainty file is that of another station.
+    #[error(
+        "{uncertainty}: its `station` field names \"{named}\" ({resolved}), but the station \
+         used is {station}, a different station: give the uncertainty of this station \
+         (--uncertainty), or the station it belongs to (--station)"
+    )]
+    UncertaintyOfAnotherStation {
+        /// The uncertainty file.
+        uncertainty: PathBuf,
+        /// What its `station` field says.
+        named: String,
+        /// That, relative to the uncertainty file's folder.
+        resolved: PathBuf,
+        /// The station file used.
+        station: PathBuf,
     },
     /// `summary.json` could not be serialised.
     #[error("{path}: {source}")]
@@ -190,7 +220,9 @@ pub struct Options {
     /// The surface stage's options; `None` stops after the spectral stage.
     pub surfaces: Option<SurfaceOptions>,
     /// The station's uncertainty: when given, the surface stage also
-    /// reports the error it induces beside the noise's.
+    /// computes the error budget (`crate::budget::linear::budget`), and
+    /// every reported σ includes the station's part; when `None` the
+    /// geometry counts as exact and the results say so.
     pub station_uncertainty: Option<StationUncertainty>,
 }
 
@@ -214,8 +246,10 @@ pub struct SurfaceStage {
     pub solution: SurfaceSolution,
     /// Its figures (`summary.json`).
     pub summary: Summary,
-    /// The station-induced covariance, when a station uncertainty was given.
-    pub station_induced: Option<StationInduced>,
+    /// The error budget of the solution (sensitivity of every coefficient
+    /// to every degree of freedom with a σ, noise, total covariance), when
+    /// a station uncertainty was given.
+    pub budget: Option<Budget>,
 }
 
 /// A reconstruction: whichever stages ran.
@@ -295,18 +329,18 @@ fn surface_stage(
         First::Points(p) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
     };
     let solution = solve_surfaces(&obs, station, opts)?;
-    let station_induced = match uncertainty {
-        Some(u) => Some(station_induced(&obs, station, u, &solution, opts)?),
+    let budget = match uncertainty {
+        Some(u) => Some(budget(&obs, station, u, &solution, opts)?),
         None => None,
     };
     let mut summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
-    if let Some(induced) = &station_induced {
-        summary = summary.with_station(induced);
+    if let Some(b) = &budget {
+        summary = summary.with_budget(b);
     }
     Ok(SurfaceStage {
         solution,
         summary,
-        station_induced,
+        budget,
     })
 }
 
@@ -352,12 +386,8 @@ impl Reconstruction {
 /// The surface stage's files in `out`.
 fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, PipelineError> {
     let (sol, summary) = (&stage.solution, &stage.summary);
-    let mut file = SurfacesFile::from_surfaces(&sol.front, &sol.back);
-    if !sol.back_fitted {
-        file.back = None; // spec: a surface that was not reconstructed is null
-    }
     let mut written = vec![out.join("surfaces.json")];
-    file.save(&written[0])?;
+    surfaces_file(stage).save(&written[0])?;
     let mut surfaces = vec![("front", &sol.front, &summary.front)];
     if let Some(back) = &summary.back {
         surfaces.push(("back", &sol.back, back));
@@ -375,8 +405,21 @@ fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, Pipe
             HEIGHT_GRID,
             figures,
         )?);
-        written.extend(pictures::coefficients(out, name, figures)?);
+        let back = name == "back";
+        let total = summary
+            .station
+            .as_ref()
+            .and_then(|s| {
+                if back {
+                    s.back.as_ref()
+                } else {
+                    Some(&s.front)
+                }
+            })
+            .map(|s| &s.total_std_nm[..]);
+        written.extend(pictures::coefficients(out, name, figures, total)?);
     }
+    written.extend(pictures::breakdown(out, summary)?);
     let path = out.join("summary.json");
     let text = serde_json::to_string_pretty(summary).map_err(|source| PipelineError::Json {
         path: path.clone(),
@@ -388,4 +431,38 @@ fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, Pipe
     })?;
     written.push(path);
     Ok(written)
+}
+
+/// Why the back is absent from `surfaces.json` when it was not fitted.
+pub const BACK_NOT_RECONSTRUCTED: &str = "no back reflection was measured (no camera pixel \
+had a point S2 from the back surface)";
+
+/// `surfaces.json` (`mfd-surfaces/2`) of a surface stage: per surface the
+/// coefficients, their 1σ of everything known (noise, and the station's
+/// part where a station uncertainty was used) and the expected RMS error;
+/// a back that was not reconstructed says why.
+pub fn surfaces_file(stage: &SurfaceStage) -> SurfacesFile {
+    let (sol, summary) = (&stage.solution, &stage.summary);
+    let entry = |surface: &crate::optics::zernike::ZernikeSurface, back: bool| {
+        let (std, expected) = summary
+            .reported(back)
+            .map_or((None, None), |(s, e)| (Some(s.to_vec()), Some(e)));
+        SurfaceEntry::Reconstructed(SurfaceCoefficients {
+            coefficients_nm: surface.coefficients_nm().to_vec(),
+            std_nm: std,
+            expected_error_rms_nm: expected,
+        })
+    };
+    let back = if sol.back_fitted {
+        entry(&sol.back, true)
+    } else {
+        SurfaceEntry::NotReconstructed {
+            because: Some(BACK_NOT_RECONSTRUCTED.into()),
+        }
+    };
+    SurfacesFile::v2(
+        ZernikeSpec::of(sol.front.basis()),
+        entry(&sol.front, false),
+        back,
+    )
 }

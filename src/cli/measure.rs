@@ -16,15 +16,22 @@ use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDispl
 use mfd::live::{Counters, Measurement, Report, SequencerConfig, Start};
 use mfd::optics::station::Station;
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
-use mfd::pipeline::{self, Input, Options};
+use mfd::pipeline::{self, find_station_uncertainty, Input, Options};
 use mfd::sim::{MirroredDisplay, ScreenState, SimFaults, SimParams, SimulatedCamera};
 
 /// Arguments of `mfd measure`.
 #[derive(Args, Clone)]
 pub struct MeasureArgs {
-    /// Station geometry (mfd-station/1).
+    /// Station geometry (mfd-station/1 or /2).
     #[arg(long)]
     station: PathBuf,
+    /// The station's uncertainty (mfd-station-uncertainty/1); default:
+    /// station_uncertainty.toml beside --station when there is one (as
+    /// `mfd calibrate solve` writes it). Its `station` field must name
+    /// --station. The result's σ then include the station's geometry;
+    /// without one the geometry counts as exact, and the result says so.
+    #[arg(long)]
+    uncertainty: Option<PathBuf>,
     /// Camera: `sim`, `aravis` (first found), `aravis:ID`, `aravis:fake`
     /// (the simulated station behind a GigE Vision fake camera on loopback),
     /// `v4l:/dev/videoN`.
@@ -38,7 +45,7 @@ pub struct MeasureArgs {
     out: PathBuf,
     #[command(flatten)]
     schedule: super::ScheduleArgs,
-    /// Simulated cameras: the element's true surfaces (mfd-surfaces/1); flat when omitted.
+    /// Simulated cameras: the element's true surfaces (mfd-surfaces/1 or /2); flat when omitted.
     #[arg(long)]
     sim_surfaces: Option<PathBuf>,
     /// Simulated cameras: read noise, standard deviation as a fraction of full scale.
@@ -387,8 +394,19 @@ fn finish(
         return Ok(());
     };
     let opts = args.surfaces.options(DEFAULT_EDGE_MARGIN_MM)?;
+    let surfaces = (!args.surfaces.no_surfaces).then_some(opts);
+    let station_uncertainty = match surfaces {
+        Some(_) => {
+            let found =
+                find_station_uncertainty(&args.station, station, args.uncertainty.as_deref())?;
+            super::output::print_uncertainty_source(found.as_ref(), &args.station);
+            found.map(|f| f.uncertainty)
+        }
+        None => None,
+    };
     let options = Options {
-        surfaces: (!args.surfaces.no_surfaces).then_some(opts),
+        surfaces,
+        station_uncertainty,
         ..Options::default()
     };
     let mut rec =

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use mfd::pipeline::{Reconstruction, SurfaceStage};
+use mfd::pipeline::{FoundUncertainty, Reconstruction, SurfaceStage, UncertaintySource};
 use mfd::solve::spectral::{PixelFlags, SpectralMaps};
 
 /// Writes a reconstruction into `out` and prints what it found; a surface
@@ -83,6 +83,29 @@ fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {
     }
 }
 
+/// Prints where the station's uncertainty came from, or that there is none
+/// and the geometry counts as exact.
+pub fn print_uncertainty_source(found: Option<&FoundUncertainty>, station: &Path) {
+    match found {
+        Some(f) => {
+            let how = match f.source {
+                UncertaintySource::Given => "",
+                UncertaintySource::BesideStation => " (found beside the station file)",
+            };
+            println!(
+                "station uncertainty: {}{how}, {} degrees of freedom with a σ",
+                f.path.display(),
+                f.uncertainty.names.len()
+            );
+        }
+        None => println!(
+            "no station uncertainty (--uncertainty, or station_uncertainty.toml beside {}): \
+             the geometry is taken as exact, σ are the noise alone",
+            station.display()
+        ),
+    }
+}
+
 /// Prints a surface solution's figures: per surface its terms, RMS ± σ, PV
 /// and uncertainty; the stages' iterations and times; χ²/dof; outliers.
 fn print_surfaces(stage: &SurfaceStage) {
@@ -102,6 +125,9 @@ fn print_surfaces(stage: &SurfaceStage) {
             f.terms, f.rms_nm, f.rms_std_nm, f.pv_nm, f.error_rms_nm
         );
     }
+    if summary.station.is_none() {
+        println!("  {}", summary.uncertainty_note);
+    }
     if let Some(st) = &summary.station {
         let splits = [("front", Some(&st.front)), ("back", st.back.as_ref())];
         for (name, s) in splits.into_iter().filter_map(|(n, s)| Some((n, s?))) {
@@ -116,8 +142,13 @@ fn print_surfaces(stage: &SurfaceStage) {
             .take(3)
             .map(|s| {
                 format!(
-                    "{} (front {:.2}, back {:.2} nm)",
-                    s.name, s.front_rms_nm, s.back_rms_nm
+                    "{} ±{} (front {:.2} nm, {:.0} %; back {:.2} nm, {:.0} %)",
+                    s.name,
+                    s.std,
+                    s.front_rms_nm,
+                    100.0 * s.front_share,
+                    s.back_rms_nm,
+                    100.0 * s.back_share
                 )
             })
             .collect();

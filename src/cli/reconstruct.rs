@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfd::acquire::acquisition::Acquisition;
 use mfd::optics::station::{Station, StationUncertainty};
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
+use mfd::pipeline::find_station_uncertainty;
 use mfd::pipeline::{self, Input, Options, ScreenPoints};
 use mfd::solve::spectral::{PixelFlags, SpectralConfig};
 
@@ -38,9 +39,13 @@ pub struct ReconstructArgs {
     #[arg(long)]
     station: Option<PathBuf>,
     /// The station's uncertainty (mfd-station-uncertainty/1, e.g. from
-    /// `mfd calibrate solve`): summary.json then gives each surface's
-    /// station-induced error beside the noise's, and the degrees of
-    /// freedom that contribute most (one re-solve per degree of freedom).
+    /// `mfd calibrate solve`); default: station_uncertainty.toml beside the
+    /// station file when there is one. Its `station` field must name the
+    /// station used. surfaces.json's σ then include the station's
+    /// geometry, and summary.json and uncertainty_breakdown.png give each
+    /// surface's noise, station and total error and the degrees of freedom
+    /// that contribute most (one re-solve per degree of freedom). Without
+    /// one the geometry counts as exact, and the results say so.
     #[arg(long)]
     uncertainty: Option<PathBuf>,
     /// Allow a third reflection (second internal round trip, paper §5.1b).
@@ -75,14 +80,9 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         anyhow::bail!("--roi takes four numbers x0,y0,x1,y1");
     }
     let surface_opts = args.surfaces.options(args.edge_margin_mm)?;
-    let station_uncertainty = args
-        .uncertainty
-        .as_deref()
-        .map(StationUncertainty::load)
-        .transpose()?;
     let surfaces = (!args.surfaces.no_surfaces).then_some(surface_opts);
     let Some(acq_dir) = &args.acquisition else {
-        return from_screen_coords(args, surfaces, station_uncertainty);
+        return from_screen_coords(args, surfaces);
     };
     let mut acq = Acquisition::open(acq_dir)?;
     let station_path = args
@@ -90,6 +90,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| acq.station_path().to_path_buf());
     let station = Station::load(&station_path)?;
+    let station_uncertainty = uncertainty(args, &station_path, &station, surfaces.is_some())?;
     let options = Options {
         spectral: SpectralConfig {
             tau_max_guess: args.tau_max_guess,
@@ -122,12 +123,12 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
 fn from_screen_coords(
     args: &ReconstructArgs,
     surfaces: Option<mfd::solve::surfaces::SurfaceOptions>,
-    station_uncertainty: Option<StationUncertainty>,
 ) -> anyhow::Result<()> {
     let (Some(coords_path), Some(station_path)) = (&args.screen_coords, &args.station) else {
         anyhow::bail!("give an acquisition folder, or --screen-coords with --station");
     };
     let station = Station::load(station_path)?;
+    let station_uncertainty = uncertainty(args, station_path, &station, surfaces.is_some())?;
     let (points, source) = ScreenPoints::load(coords_path, args.screen_std.as_deref(), &station)?;
     match source {
         Some(p) => println!("uncertainty of the screen points from {}", p.display()),
@@ -147,6 +148,23 @@ fn from_screen_coords(
     super::output::write_and_print(&rec, &args.out)
 }
 
+/// The station's uncertainty: `--uncertainty`, else the calibration's file
+/// beside the station file, else none; printed either way. Not looked for
+/// when the surface stage does not run.
+fn uncertainty(
+    args: &ReconstructArgs,
+    station_path: &std::path::Path,
+    station: &Station,
+    surfaces: bool,
+) -> anyhow::Result<Option<StationUncertainty>> {
+    if !surfaces {
+        return Ok(None);
+    }
+    let found = find_station_uncertainty(station_path, station, args.uncertainty.as_deref())?;
+    super::output::print_uncertainty_source(found.as_ref(), station_path);
+    Ok(found.map(|f| f.uncertainty))
+}
+
 /// `--out`'s long help: every file, with the flag bits of `flags.npy` from
 /// the library's own table.
 fn out_help() -> String {
@@ -160,8 +178,10 @@ fn out_help() -> String {
          screen_cov.npy [rows, cols, 4, 4] (covariance of u1, v1, u2, v2, px²), amplitudes.npy \
          [rows, cols, 4] (A, B1, B2, B3 in counts), tau_max.npy, residual_rms.npy (counts), \
          separation_bins.npy (front–back separation in Fourier bins), reflections.npy (u8: \
-         model chosen, 0–3), flags.npy (u16 bits: {}); then surfaces.json (mfd-surfaces/1), \
-         front/back_height_nm.npy, front/back.png and *_coefficients.png, summary.json.",
+         model chosen, 0–3), flags.npy (u16 bits: {}); then surfaces.json (mfd-surfaces/2: \
+         coefficients, their 1σ of everything known, the expected RMS error), \
+         front/back_height_nm.npy, front/back.png and *_coefficients.png, \
+         uncertainty_breakdown.png (noise and station σ per Zernike term), summary.json.",
         bits.join(", ")
     )
 }

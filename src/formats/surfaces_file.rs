@@ -1,13 +1,21 @@
-//! `surfaces.json` (`mfd-surfaces/1`): front and back Zernike coefficients.
+//! `surfaces.json`: front and back Zernike coefficients, as
+//! `mfd-surfaces/1` (coefficients only) or `mfd-surfaces/2` (beside each
+//! surface's coefficients their 1σ, the expected RMS error over the
+//! aperture, and why a surface was not reconstructed). The reader takes
+//! both versions, strictly: a field the file's version does not allow, a
+//! `std_nm` of another length than `coefficients_nm`, a negative σ are
+//! errors naming the file and the field. `interchange.md` is the spec.
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::optics::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
 
-/// The format tag of a surfaces file.
+/// The format tag of a version-1 surfaces file (coefficients only).
 pub const SURFACES_FORMAT: &str = "mfd-surfaces/1";
+/// The format tag of a version-2 surfaces file (with uncertainties).
+pub const SURFACES_FORMAT_V2: &str = "mfd-surfaces/2";
 
 /// What went wrong with a surfaces file.
 #[derive(Debug, thiserror::Error)]
@@ -21,8 +29,8 @@ pub enum SurfacesFileError {
         #[source]
         source: std::io::Error,
     },
-    /// Not valid JSON for `mfd-surfaces/1`.
-    #[error("{path}: not a valid mfd-surfaces/1 file: {source}")]
+    /// Not valid JSON for `mfd-surfaces/1` or `/2`.
+    #[error("{path}: not a valid mfd-surfaces/1 or mfd-surfaces/2 file: {source}")]
     Parse {
         /// The file.
         path: PathBuf,
@@ -30,14 +38,15 @@ pub enum SurfacesFileError {
         #[source]
         source: serde_json::Error,
     },
-    /// A field holds an impossible value.
+    /// A field holds an impossible value, or one the file's version does
+    /// not allow.
     #[error("{path}: field `{field}`: {problem}")]
     Invalid {
         /// The file.
         path: PathBuf,
         /// The field, e.g. `front.coefficients_nm[3]`.
         field: String,
-        /// What is wrong.
+        /// What is wrong and what was expected.
         problem: String,
     },
 }
@@ -56,30 +65,122 @@ pub struct ZernikeSpec {
     pub center_mm: [f64; 2],
 }
 
-/// One surface's coefficients.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+impl ZernikeSpec {
+    /// The block describing `basis` (Noll order, RMS normalisation).
+    pub fn of(basis: &ZernikeBasis) -> Self {
+        ZernikeSpec {
+            ordering: "noll".into(),
+            normalization: "rms".into(),
+            radius_mm: basis.radius_mm(),
+            center_mm: basis.center_mm(),
+        }
+    }
+}
+
+/// One reconstructed surface's coefficients, and (version 2) how well they
+/// are known.
+#[derive(Debug, Clone, PartialEq)]
 pub struct SurfaceCoefficients {
     /// `coefficients_nm[k]` is Noll j = k + 1, nm.
     pub coefficients_nm: Vec<f64>,
+    /// Version 2: `std_nm[k]` is the 1σ of `coefficients_nm[k]`, nm,
+    /// everything known included (noise, and the station's uncertainty
+    /// where one was given); `None` when not known (always in version 1).
+    pub std_nm: Option<Vec<f64>>,
+    /// Version 2: the expected RMS over the aperture of the reported minus
+    /// the true surface, piston and tilt removed, nm.
+    pub expected_error_rms_nm: Option<f64>,
 }
 
-/// The whole file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// One surface of the file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SurfaceEntry {
+    /// The surface was reconstructed.
+    Reconstructed(SurfaceCoefficients),
+    /// It was not: `null` in the file when `because` is `None`; in version
+    /// 2 `{"coefficients_nm": null, "not_reconstructed_because": because}`.
+    NotReconstructed {
+        /// Why, in words an operator understands.
+        because: Option<String>,
+    },
+}
+
+impl SurfaceEntry {
+    /// The coefficients of a reconstructed surface.
+    pub fn coefficients(&self) -> Option<&SurfaceCoefficients> {
+        match self {
+            SurfaceEntry::Reconstructed(c) => Some(c),
+            SurfaceEntry::NotReconstructed { .. } => None,
+        }
+    }
+
+    /// Whether the surface is absent.
+    pub fn is_none(&self) -> bool {
+        self.coefficients().is_none()
+    }
+}
+
+/// The whole file, either version.
+#[derive(Debug, Clone, PartialEq)]
 pub struct SurfacesFile {
-    /// Must be [`SURFACES_FORMAT`].
+    /// [`SURFACES_FORMAT`] or [`SURFACES_FORMAT_V2`].
     pub format: String,
     /// Basis definition.
     pub zernike: ZernikeSpec,
-    /// Front surface, or `null` when not reconstructed.
-    pub front: Option<SurfaceCoefficients>,
-    /// Back surface, or `null` when not reconstructed.
-    pub back: Option<SurfaceCoefficients>,
+    /// Front surface.
+    pub front: SurfaceEntry,
+    /// Back surface.
+    pub back: SurfaceEntry,
+}
+
+/// One surface as it stands in the JSON (both versions' fields; which are
+/// allowed is checked after parsing, so that the error names the version).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSurface {
+    /// Absent (outer `None`) is an error; `null` is a surface not
+    /// reconstructed (version 2).
+    #[serde(default, deserialize_with = "present")]
+    coefficients_nm: Option<Option<Vec<f64>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    std_nm: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    expected_error_rms_nm: Option<f64>,
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
+    not_reconstructed_because: Option<Option<String>>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    format: String,
+    zernike: ZernikeSpec,
+    front: Option<RawSurface>,
+    back: Option<RawSurface>,
+}
+
+/// A field that is there, `null` or not: `Some(None)` for `null`.
+fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(
+    d: D,
+) -> Result<Option<Option<T>>, D::Error> {
+    Option::<T>::deserialize(d).map(Some)
+}
+
+/// What a field of `path` holds that it may not.
+fn invalid(path: &Path, field: &str, problem: String) -> SurfacesFileError {
+    SurfacesFileError::Invalid {
+        path: path.to_path_buf(),
+        field: field.to_string(),
+        problem,
+    }
 }
 
 impl SurfacesFile {
-    /// Reads and validates a surfaces file.
+    /// Reads and validates a surfaces file of either version.
     ///
     /// # Errors
     /// [`SurfacesFileError`] naming the file and field.
@@ -88,117 +189,296 @@ impl SurfacesFile {
             path: path.to_path_buf(),
             source,
         })?;
-        let file: SurfacesFile =
-            serde_json::from_str(&text).map_err(|source| SurfacesFileError::Parse {
+        Self::from_json_str(&text, path)
+    }
+
+    /// Parses and validates; `path` is only used in errors.
+    ///
+    /// # Errors
+    /// [`SurfacesFileError::Parse`] or [`SurfacesFileError::Invalid`].
+    pub fn from_json_str(text: &str, path: &Path) -> Result<Self, SurfacesFileError> {
+        let raw: RawFile =
+            serde_json::from_str(text).map_err(|source| SurfacesFileError::Parse {
                 path: path.to_path_buf(),
                 source,
             })?;
-        file.validate(path)?;
+        let v2 = match raw.format.as_str() {
+            SURFACES_FORMAT => false,
+            SURFACES_FORMAT_V2 => true,
+            other => {
+                return Err(invalid(
+                    path,
+                    "format",
+                    format!(
+                    "expected \"{SURFACES_FORMAT}\" or \"{SURFACES_FORMAT_V2}\", found \"{other}\""
+                ),
+                ))
+            }
+        };
+        check_zernike(&raw.zernike, path)?;
+        let file = SurfacesFile {
+            front: entry(raw.front, "front", v2, path)?,
+            back: entry(raw.back, "back", v2, path)?,
+            format: raw.format,
+            zernike: raw.zernike,
+        };
         Ok(file)
     }
 
-    fn validate(&self, path: &Path) -> Result<(), SurfacesFileError> {
-        let bad = |field: &str, problem: String| {
-            Err(SurfacesFileError::Invalid {
-                path: path.to_path_buf(),
-                field: field.to_string(),
-                problem,
-            })
+    /// The file's JSON text (pretty, with a final newline), after the
+    /// checks the reader applies: what is written reads back.
+    ///
+    /// # Errors
+    /// [`SurfacesFileError::Invalid`] for what the reader would reject
+    /// (`path` names the file in it).
+    pub fn to_json_string(&self, path: &Path) -> Result<String, SurfacesFileError> {
+        let v2 = self.format == SURFACES_FORMAT_V2;
+        let raw = RawFile {
+            format: self.format.clone(),
+            zernike: self.zernike.clone(),
+            front: raw_entry(&self.front, v2),
+            back: raw_entry(&self.back, v2),
         };
-        if self.format != SURFACES_FORMAT {
-            return bad(
-                "format",
-                format!("expected \"{SURFACES_FORMAT}\", found \"{}\"", self.format),
-            );
-        }
-        let z = &self.zernike;
-        if z.ordering != "noll" {
-            return bad(
-                "zernike.ordering",
-                format!("expected \"noll\", found \"{}\"", z.ordering),
-            );
-        }
-        if z.normalization != "rms" {
-            return bad(
-                "zernike.normalization",
-                format!("expected \"rms\", found \"{}\"", z.normalization),
-            );
-        }
-        if !(z.radius_mm.is_finite() && z.radius_mm > 0.0) {
-            return bad(
-                "zernike.radius_mm",
-                format!("expected a finite radius > 0, found {}", z.radius_mm),
-            );
-        }
-        if !z.center_mm.iter().all(|c| c.is_finite()) {
-            return bad(
-                "zernike.center_mm",
-                format!("expected finite numbers, found {:?}", z.center_mm),
-            );
-        }
-        for (name, s) in [("front", &self.front), ("back", &self.back)] {
-            let Some(s) = s else { continue };
-            if s.coefficients_nm.is_empty() {
-                return bad(
-                    &format!("{name}.coefficients_nm"),
-                    "expected at least one coefficient".into(),
-                );
-            }
-            if let Some((k, c)) = s
-                .coefficients_nm
-                .iter()
-                .enumerate()
-                .find(|(_, c)| !c.is_finite())
-            {
-                return bad(
-                    &format!("{name}.coefficients_nm[{k}]"),
-                    format!("expected a finite number, found {c}"),
-                );
-            }
-        }
-        Ok(())
+        // Plain numbers, strings and arrays: serialising cannot fail.
+        let text = serde_json::to_string_pretty(&raw).unwrap_or_default() + "\n";
+        Self::from_json_str(&text, path)?;
+        Ok(text)
     }
 
     /// Writes the file as pretty JSON.
     ///
     /// # Errors
+    /// [`SurfacesFileError::Invalid`] for a file the reader would reject,
     /// [`SurfacesFileError::Io`].
     pub fn save(&self, path: &Path) -> Result<(), SurfacesFileError> {
-        let text = serde_json::to_string_pretty(self).unwrap_or_default();
-        std::fs::write(path, text + "\n").map_err(|source| SurfacesFileError::Io {
+        let text = self.to_json_string(path)?;
+        std::fs::write(path, text).map_err(|source| SurfacesFileError::Io {
             path: path.to_path_buf(),
             source,
         })
     }
 
-    /// The file describing two surfaces (on the front's basis disk).
+    /// The version-1 file describing two surfaces (on the front's basis
+    /// disk): coefficients only, as a simulation's truth is written.
     pub fn from_surfaces(front: &ZernikeSurface, back: &ZernikeSurface) -> Self {
-        let b = front.basis();
+        let plain = |s: &ZernikeSurface| {
+            SurfaceEntry::Reconstructed(SurfaceCoefficients {
+                coefficients_nm: s.coefficients_nm().to_vec(),
+                std_nm: None,
+                expected_error_rms_nm: None,
+            })
+        };
         SurfacesFile {
             format: SURFACES_FORMAT.to_string(),
-            zernike: ZernikeSpec {
-                ordering: "noll".into(),
-                normalization: "rms".into(),
-                radius_mm: b.radius_mm(),
-                center_mm: b.center_mm(),
-            },
-            front: Some(SurfaceCoefficients {
-                coefficients_nm: front.coefficients_nm().to_vec(),
-            }),
-            back: Some(SurfaceCoefficients {
-                coefficients_nm: back.coefficients_nm().to_vec(),
-            }),
+            zernike: ZernikeSpec::of(front.basis()),
+            front: plain(front),
+            back: plain(back),
+        }
+    }
+
+    /// A version-2 file on `zernike`'s basis.
+    pub fn v2(zernike: ZernikeSpec, front: SurfaceEntry, back: SurfaceEntry) -> Self {
+        SurfacesFile {
+            format: SURFACES_FORMAT_V2.to_string(),
+            zernike,
+            front,
+            back,
         }
     }
 
     /// Front coefficients, if present.
     pub fn front_coefficients(&self) -> Option<&Vec<f64>> {
-        self.front.as_ref().map(|s| &s.coefficients_nm)
+        self.front.coefficients().map(|s| &s.coefficients_nm)
     }
 
     /// Back coefficients, if present.
     pub fn back_coefficients(&self) -> Option<&Vec<f64>> {
-        self.back.as_ref().map(|s| &s.coefficients_nm)
+        self.back.coefficients().map(|s| &s.coefficients_nm)
+    }
+}
+
+fn check_zernike(z: &ZernikeSpec, path: &Path) -> Result<(), SurfacesFileError> {
+    if z.ordering != "noll" {
+        let problem = format!("expected \"noll\", found \"{}\"", z.ordering);
+        return Err(invalid(path, "zernike.ordering", problem));
+    }
+    if z.normalization != "rms" {
+        let problem = format!("expected \"rms\", found \"{}\"", z.normalization);
+        return Err(invalid(path, "zernike.normalization", problem));
+    }
+    if !(z.radius_mm.is_finite() && z.radius_mm > 0.0) {
+        let problem = format!("expected a finite radius > 0, found {}", z.radius_mm);
+        return Err(invalid(path, "zernike.radius_mm", problem));
+    }
+    if !z.center_mm.iter().all(|c| c.is_finite()) {
+        let problem = format!("expected finite numbers, found {:?}", z.center_mm);
+        return Err(invalid(path, "zernike.center_mm", problem));
+    }
+    Ok(())
+}
+
+/// One surface of the JSON checked against its version's rules.
+fn entry(
+    raw: Option<RawSurface>,
+    name: &str,
+    v2: bool,
+    path: &Path,
+) -> Result<SurfaceEntry, SurfacesFileError> {
+    let Some(raw) = raw else {
+        return Ok(SurfaceEntry::NotReconstructed { because: None });
+    };
+    let field = |f: &str| format!("{name}.{f}");
+    let only_v2 = |f: &str| {
+        invalid(
+            path,
+            &field(f),
+            format!("not a field of {SURFACES_FORMAT} (it is one of {SURFACES_FORMAT_V2}: write that format)"),
+        )
+    };
+    if !v2 {
+        if raw.std_nm.is_some() {
+            return Err(only_v2("std_nm"));
+        }
+        if raw.expected_error_rms_nm.is_some() {
+            return Err(only_v2("expected_error_rms_nm"));
+        }
+        if raw.not_reconstructed_because.is_some() {
+            return Err(only_v2("not_reconstructed_because"));
+        }
+    }
+    let because = raw.not_reconstructed_because.flatten();
+    match raw.coefficients_nm {
+        None => Err(invalid(
+            path,
+            &field("coefficients_nm"),
+            "missing: a surface is `null` or has `coefficients_nm`".into(),
+        )),
+        Some(None) if !v2 => Err(invalid(
+            path,
+            &field("coefficients_nm"),
+            format!("null: in {SURFACES_FORMAT} a surface not reconstructed is `null` as a whole"),
+        )),
+        Some(None) => {
+            let Some(because) = because.filter(|b| !b.trim().is_empty()) else {
+                let problem = "null without `not_reconstructed_because`: say why the surface \
+                               was not reconstructed";
+                return Err(invalid(
+                    path,
+                    &field("not_reconstructed_because"),
+                    problem.into(),
+                ));
+            };
+            for (f, set) in [
+                ("std_nm", raw.std_nm.is_some()),
+                ("expected_error_rms_nm", raw.expected_error_rms_nm.is_some()),
+            ] {
+                if set {
+                    let problem = "given for a surface that was not reconstructed".into();
+                    return Err(invalid(path, &field(f), problem));
+                }
+            }
+            Ok(SurfaceEntry::NotReconstructed {
+                because: Some(because),
+            })
+        }
+        Some(Some(coefficients_nm)) => {
+            if let Some(b) = because {
+                let problem = format!("\"{b}\" given for a surface that has coefficients");
+                return Err(invalid(path, &field("not_reconstructed_because"), problem));
+            }
+            let c = SurfaceCoefficients {
+                coefficients_nm,
+                std_nm: raw.std_nm,
+                expected_error_rms_nm: raw.expected_error_rms_nm,
+            };
+            check_numbers(&c, name, path)?;
+            Ok(SurfaceEntry::Reconstructed(c))
+        }
+    }
+}
+
+/// Coefficients finite and at least one; σ finite, ≥ 0 and one per
+/// coefficient; the expected error finite and ≥ 0.
+fn check_numbers(
+    c: &SurfaceCoefficients,
+    name: &str,
+    path: &Path,
+) -> Result<(), SurfacesFileError> {
+    let n = c.coefficients_nm.len();
+    if n == 0 {
+        let field = format!("{name}.coefficients_nm");
+        return Err(invalid(
+            path,
+            &field,
+            "expected at least one coefficient".into(),
+        ));
+    }
+    if let Some((k, v)) = c
+        .coefficients_nm
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !v.is_finite())
+    {
+        let field = format!("{name}.coefficients_nm[{k}]");
+        return Err(invalid(
+            path,
+            &field,
+            format!("expected a finite number, found {v}"),
+        ));
+    }
+    if let Some(std) = &c.std_nm {
+        if std.len() != n {
+            let field = format!("{name}.std_nm");
+            let problem = format!(
+                "{} entries where `coefficients_nm` has {n}: one σ per coefficient",
+                std.len()
+            );
+            return Err(invalid(path, &field, problem));
+        }
+        if let Some((k, s)) = std
+            .iter()
+            .enumerate()
+            .find(|(_, s)| !(s.is_finite() && **s >= 0.0))
+        {
+            let field = format!("{name}.std_nm[{k}]");
+            return Err(invalid(
+                path,
+                &field,
+                format!("expected a finite σ ≥ 0, found {s}"),
+            ));
+        }
+    }
+    if let Some(e) = c.expected_error_rms_nm {
+        if !(e.is_finite() && e >= 0.0) {
+            let field = format!("{name}.expected_error_rms_nm");
+            return Err(invalid(
+                path,
+                &field,
+                format!("expected a finite RMS ≥ 0, found {e}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The JSON form of one surface: `null`, the object of a reconstructed
+/// surface (version 2 with `"not_reconstructed_because": null`), or
+/// version 2's object of a surface not reconstructed.
+fn raw_entry(e: &SurfaceEntry, v2: bool) -> Option<RawSurface> {
+    match e {
+        SurfaceEntry::NotReconstructed { because: None } => None,
+        SurfaceEntry::NotReconstructed { because: Some(b) } => Some(RawSurface {
+            coefficients_nm: Some(None),
+            std_nm: None,
+            expected_error_rms_nm: None,
+            not_reconstructed_because: Some(Some(b.clone())),
+        }),
+        SurfaceEntry::Reconstructed(c) => Some(RawSurface {
+            coefficients_nm: Some(Some(c.coefficients_nm.clone())),
+            std_nm: c.std_nm.clone(),
+            expected_error_rms_nm: c.expected_error_rms_nm,
+            not_reconstructed_because: v2.then_some(None),
+        }),
     }
 }
 
@@ -221,47 +501,5 @@ pub fn to_surface(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    const GOOD: &str = r#"{"format": "mfd-surfaces/1",
-        "zernike": {"ordering": "noll", "normalization": "rms", "radius_mm": 25.5, "center_mm": [0.0, 0.0]},
-        "front": {"coefficients_nm": [0.0, 12.5, -3.1, 40.2]}, "back": null}"#;
-
-    fn load_text(text: &str) -> Result<SurfacesFile, SurfacesFileError> {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("surfaces.json");
-        std::fs::write(&p, text).unwrap();
-        SurfacesFile::load(&p)
-    }
-
-    #[test]
-    fn spec_example_loads_and_round_trips() {
-        let f = load_text(GOOD).unwrap();
-        assert_eq!(f.front_coefficients().unwrap().len(), 4);
-        assert!(f.back.is_none());
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("s.json");
-        f.save(&p).unwrap();
-        assert_eq!(SurfacesFile::load(&p).unwrap(), f);
-    }
-
-    #[test]
-    fn bad_files_name_the_field() {
-        let err = load_text(&GOOD.replace("\"noll\"", "\"ansi\""))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("zernike.ordering") && err.contains("ansi"),
-            "{err}"
-        );
-        let err = load_text(&GOOD.replace("\"back\": null", "\"back\": null, \"extra\": 1"))
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("extra"), "{err}");
-        let err = load_text(&GOOD.replace("25.5", "-1"))
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("zernike.radius_mm"), "{err}");
-    }
-}
+#[path = "surfaces_file_tests.rs"]
+mod tests;
