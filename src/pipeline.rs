@@ -31,10 +31,9 @@ use crate::solve::surfaces::{
     Uncertainty,
 };
 
-mod linear_budget;
 mod station_uncertainty;
 
-use linear_budget::linear::budget;
+use crate::budget::linear::budget;
 
 pub use station_uncertainty::{
     find_station_uncertainty, FoundUncertainty, UncertaintySource, STATION_UNCERTAINTY_FILE,
