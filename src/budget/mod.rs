@@ -17,6 +17,12 @@
 //! - RMS figures over the aperture leave piston and tilt out (j ≥ 4), as
 //!   `expected_error_rms_nm` of `mfd-surfaces/2` does.
 
+pub mod linear;
+pub mod monte_carlo;
+pub mod picture;
+pub mod scene;
+pub mod table;
+
 use nalgebra::DMatrix;
 
 use crate::optics::station::Dof;
@@ -37,7 +43,10 @@ pub struct DofEntry {
 impl DofEntry {
     /// The front's change at one σ, nm per coefficient.
     pub fn front_contribution_nm(&self) -> Vec<f64> {
-        self.front_nm_per_unit.iter().map(|s| s * self.std).collect()
+        self.front_nm_per_unit
+            .iter()
+            .map(|s| s * self.std)
+            .collect()
     }
 
     /// The back's change at one σ, nm per coefficient.
