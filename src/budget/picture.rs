@@ -157,7 +157,7 @@ fn panel<'a>(
         .caption(title, (FAMILY, 24))
         .margin(14)
         .x_label_area_size(70)
-        .y_label_area_size(70)
+        .y_label_area_size(80)
         .build_cartesian_2d(3.5f64..last as f64 + 0.5, 0.0..top)?;
     chart
         .configure_mesh()
@@ -171,9 +171,12 @@ fn panel<'a>(
                 String::new()
             }
         })
-        .x_desc(
-            "Noll term (Z4 defocus, Z5/Z6 astigmatism, Z7/Z8 coma, Z9/Z10 trefoil, Z11 spherical)",
-        )
+        .y_label_formatter(&|y| {
+            let s = format!("{y:.3}");
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        })
+        .max_light_lines(0)
+        .x_desc("Z4 defocus, Z5–6 astigmatism, Z7–8 coma, Z9–10 trefoil, Z11 spherical")
         .y_desc("1σ, nm")
         .label_style((FAMILY, 15))
         .axis_desc_style((FAMILY, 15))

@@ -125,6 +125,13 @@ pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
     let surfaces = scene::expected_surfaces(args.surfaces.as_deref(), &station)?;
     let start = std::time::Instant::now();
     let sc = scene::scene(&station, surfaces, &frames, &opts)?;
+    log::info!(
+        "scene: {} pixels traced, bound on {}×{} px blocks, reconstructed in {:.1} s",
+        sc.observations.pixels.len(),
+        sc.bound_stride_px,
+        sc.bound_stride_px,
+        start.elapsed().as_secs_f64()
+    );
     let b = linear::budget(
         &sc.observations,
         &station,
