@@ -17,6 +17,9 @@ use crate::optics::station::{Station, StationUncertainty};
 use crate::optics::trace::{Plate, TracedView};
 use crate::solve::surfaces::{reconstruct, Observations, Uncertainty};
 
+/// One draw's errors of the front and the back coefficients, nm.
+type DrawErrors = (Vec<f64>, Vec<f64>);
+
 /// The Monte Carlo check's outcome.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MonteCarlo {
@@ -120,7 +123,7 @@ pub fn monte_carlo(
         },
     );
     let sopts = opts.surface_options();
-    let errors: Vec<Result<(Vec<f64>, Vec<f64>), BudgetError>> = (0..draws)
+    let errors: Vec<Result<DrawErrors, BudgetError>> = (0..draws)
         .into_par_iter()
         .map(|k| {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(k as u64));

@@ -181,10 +181,10 @@ fn panel<'a>(
         .label_style((FAMILY, 15))
         .axis_desc_style((FAMILY, 15))
         .draw()?;
-    for k in 3..last {
+    for (k, &t) in total.iter().enumerate().take(last).skip(3) {
         let x = (k + 1) as f64;
         let mut y0 = 0.0;
-        for (c, h) in segments(all, back, k, total[k]) {
+        for (c, h) in segments(all, back, k, t) {
             let colour = if c < TOP { COLOURS[c] } else { REST };
             chart.draw_series(std::iter::once(Rectangle::new(
                 [(x - 0.35, y0), (x + 0.35, y0 + h)],

@@ -50,7 +50,7 @@ pub enum BudgetError {
         format: &'static str,
         /// The TOML error.
         #[source]
-        source: toml::de::Error,
+        source: Box<toml::de::Error>,
     },
     /// An input (a file's field, a command-line value) holds what is not allowed.
     #[error("{input}: {problem}")]
@@ -106,7 +106,7 @@ pub fn load_schedule(path: &Path) -> Result<Vec<FrameInfo>, BudgetError> {
     let file: ScheduleFile = toml::from_str(&text).map_err(|source| BudgetError::Parse {
         path: path.to_path_buf(),
         format: SCHEDULE_FORMAT,
-        source,
+        source: Box::new(source),
     })?;
     let at = |field: String| format!("{}: {field}", path.display());
     if file.format != SCHEDULE_FORMAT {
