@@ -68,13 +68,15 @@ fn contributors(budget: &Budget) -> Vec<Contributor> {
             back: o.back_nm.clone(),
         }))
         .collect();
+    // Ranked by the largest variance the contributor puts into any one
+    // term (j ≥ 4), so that the term a contributor dominates gets its colour.
     let weight = |c: &Contributor| -> f64 {
         c.front
             .iter()
             .skip(3)
             .chain(c.back.iter().skip(3))
             .map(|v| v * v)
-            .sum()
+            .fold(0.0, f64::max)
     };
     all.sort_by(|a, b| weight(b).total_cmp(&weight(a)));
     all
