@@ -40,6 +40,8 @@ enum Command {
     Display(cli::display::DisplayArgs),
     /// Calibration sessions: template, target positions, check, capture.
     Calibrate(cli::calibrate::CalibrateArgs),
+    /// Error budget: every degree of freedom's effect on every Zernike term (paper Tables 1–4).
+    Budget(cli::budget::BudgetArgs),
 }
 
 /// The library's diagnostics (`log`) on stderr: warnings and errors with
@@ -90,6 +92,7 @@ fn main() -> std::process::ExitCode {
         Command::Display(args) => cli::display::run(&args),
         Command::Measure(args) => cli::measure::run(&args),
         Command::Calibrate(args) => cli::calibrate::run(&args),
+        Command::Budget(args) => cli::budget::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -17,6 +17,12 @@
 //! - RMS figures over the aperture leave piston and tilt out (j ≥ 4), as
 //!   `expected_error_rms_nm` of `mfd-surfaces/2` does.
 
+pub mod linear;
+pub mod monte_carlo;
+pub mod picture;
+pub mod scene;
+pub mod table;
+
 use nalgebra::DMatrix;
 
 use crate::optics::station::Dof;

@@ -1,6 +1,7 @@
 //! Subcommands of the `mfd` binary.
 
 pub mod bench;
+pub mod budget;
 pub mod calibrate;
 pub mod calibrate_solve;
 pub mod compare;
