@@ -17,19 +17,17 @@
 //! - RMS figures over the aperture leave piston and tilt out (j ≥ 4), as
 //!   `expected_error_rms_nm` of `mfd-surfaces/2` does.
 
+pub mod fisher;
 pub mod linear;
 pub mod monte_carlo;
 pub mod picture;
 pub mod scene;
+pub mod station_dual;
 pub mod table;
 
 use nalgebra::DMatrix;
 
 use crate::optics::station::Dof;
-
-pub mod fisher;
-pub mod linear;
-pub mod station_dual;
 
 /// One degree of freedom's row of the budget.
 #[derive(Debug, Clone, PartialEq)]
