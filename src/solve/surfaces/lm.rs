@@ -93,6 +93,11 @@ pub fn apply(plate: &Plate, layout: &Layout, delta: &DVector<f64>) -> Result<Pla
     Ok(out)
 }
 
+/// The largest share of the residuals a Levenberg–Marquardt step may lose
+/// and still be compared by χ² per residual (see `comparable`): 1e-3, a
+/// rim's worth of pixels, not a region.
+pub const MAX_LOST_FRACTION: f64 = 1e-3;
+
 /// The surface solvers' damping schedule for the shared loop
 /// ([`crate::kernels::lm`], whose policy it parameterises).
 ///
@@ -165,9 +170,21 @@ impl LeastSquares for SurfaceProblem<'_> {
         apply(plate, self.layout, step)
     }
 
-    /// A step that loses paths is not comparable by χ² alone: rejected.
+    /// A step that loses paths is not comparable by χ² alone (fewer terms
+    /// sum lower). It is taken only when it loses few of them — at most
+    /// [`MAX_LOST_FRACTION`] of the residuals, paths at the rim or the
+    /// screen's edge that the better surfaces no longer reach — and lowers
+    /// χ² per residual too; otherwise rejected. Rejecting every such step
+    /// stalled the back's solve 20× above its χ² when a tilted back's
+    /// optimum no longer reaches one rim pixel's screen point.
     fn comparable(&self, current: &Linearised, trial: &Linearised) -> bool {
-        trial.normal.n_resid >= current.normal.n_resid
+        let (n_cur, n_trial) = (current.normal.n_resid, trial.normal.n_resid);
+        if n_trial >= n_cur {
+            return true;
+        }
+        let lost = (n_cur - n_trial) as f64;
+        lost <= MAX_LOST_FRACTION * n_cur as f64
+            && trial.normal.chi2 / n_trial as f64 <= current.normal.chi2 / n_cur as f64
     }
 
     fn small_step(&self, step: &DVector<f64>) -> bool {
