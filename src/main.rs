@@ -10,7 +10,7 @@ use clap::{Parser, Subcommand};
 /// Lengths are millimetres, angles degrees, surface heights and Zernike
 /// coefficients nanometres (Noll order, RMS-normalised). File formats follow
 /// the interchange spec: station.toml (mfd-station/1), acquisition folders
-/// (mfd-acquisition/1), surfaces.json (mfd-surfaces/1), screen_coords.npy.
+/// (mfd-acquisition/1), surfaces.json (mfd-surfaces/2; /1 read), screen_coords.npy.
 #[derive(Parser)]
 #[command(name = "mfd", version, about, long_about = None)]
 struct Cli {

@@ -20,7 +20,7 @@ use crate::formats::npy::{self, NpyError};
 use crate::formats::surfaces_file::{
     SurfaceCoefficients, SurfaceEntry, SurfacesFile, SurfacesFileError, ZernikeSpec,
 };
-use crate::optics::station::{Station, StationUncertainty, UncertaintyError};
+use crate::optics::station::{Dof, Station, StationUncertainty, UncertaintyError};
 use crate::report::pictures;
 use crate::report::plot::PlotError;
 use crate::report::summary::Summary;
@@ -34,6 +34,8 @@ use crate::solve::surfaces::{
 mod station_uncertainty;
 
 use crate::budget::linear::budget;
+use crate::budget::refine::{refine, RefineError, Refined};
+use crate::solve::surfaces::station_error::with_station;
 
 pub use station_uncertainty::{
     find_station_uncertainty, FoundUncertainty, UncertaintySource, STATION_UNCERTAINTY_FILE,
@@ -84,6 +86,9 @@ pub enum PipelineError {
     /// A station uncertainty file could not be read.
     #[error(transparent)]
     Uncertainty(#[from] UncertaintyError),
+    /// The refined station could not be written.
+    #[error(transparent)]
+    Station(#[from] crate::optics::station::StationError),
     /// A station uncertainty file is that of another station.
     #[error(
         "{uncertainty}: its `station` field names \"{named}\" ({resolved}), but the station \
@@ -223,6 +228,10 @@ pub struct Options {
     /// every reported σ includes the station's part; when `None` the
     /// geometry counts as exact and the results say so.
     pub station_uncertainty: Option<StationUncertainty>,
+    /// Degrees of freedom estimated jointly with the surfaces, the station
+    /// uncertainty their prior ([`crate::budget::refine`]); each needs a σ
+    /// there. Empty: the station is taken as given.
+    pub refine: Vec<Dof>,
 }
 
 /// The spectral stage's result.
@@ -249,6 +258,10 @@ pub struct SurfaceStage {
     /// to every degree of freedom with a σ, noise, total covariance), when
     /// a station uncertainty was given.
     pub budget: Option<Budget>,
+    /// The degrees of freedom measured with the surfaces (`Options::refine`):
+    /// the refined station, the estimates; the solution and the budget
+    /// above are those on the refined station.
+    pub refined: Option<Refined>,
 }
 
 /// A reconstruction: whichever stages ran.
@@ -296,10 +309,10 @@ pub fn reconstruct(
         Input::Streamed(solver) => First::Spectral(spectral_stage(solver, 0.0)?),
         Input::ScreenPoints(points) => First::Points(points),
     };
-    let surfaces = options
-        .surfaces
-        .as_ref()
-        .map(|opts| surface_stage(&first, station, opts, options.station_uncertainty.as_ref()));
+    let surfaces = options.surfaces.as_ref().map(|opts| {
+        let unc = options.station_uncertainty.as_ref();
+        surface_stage(&first, station, opts, unc, &options.refine)
+    });
     let spectral = match first {
         First::Spectral(s) => Some(s),
         First::Points(_) => None,
@@ -318,6 +331,7 @@ fn surface_stage(
     station: &Station,
     opts: &SurfaceOptions,
     uncertainty: Option<&StationUncertainty>,
+    refine: &[Dof],
 ) -> Result<SurfaceStage, SurfaceError> {
     let t = Instant::now();
     let obs = match first {
@@ -327,7 +341,32 @@ fn surface_stage(
         }
         First::Points(p) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
     };
-    let solution = solve_surfaces(&obs, station, opts)?;
+    let mut solution = solve_surfaces(&obs, station, opts)?;
+    let refined = match uncertainty {
+        Some(u) if !refine.is_empty() => {
+            let r = refine_station(&obs, station, u, refine, &solution, opts)?;
+            solution = r.solution.clone();
+            Some(r)
+        }
+        None if !refine.is_empty() => {
+            return Err(SurfaceError::Input {
+                what: "--refine",
+                problem: "a refined degree of freedom needs a prior: give the station's \
+                          uncertainty (--uncertainty, or station_uncertainty.toml beside \
+                          the station)"
+                    .into(),
+            })
+        }
+        _ => None,
+    };
+    let (obs, station, uncertainty) = match &refined {
+        Some(r) => (
+            with_station(&obs, &r.station),
+            &r.station,
+            Some(&r.uncertainty),
+        ),
+        None => (obs, station, uncertainty),
+    };
     let budget = match uncertainty {
         Some(u) => Some(budget(&obs, station, u, &solution, opts)?),
         None => None,
@@ -336,10 +375,42 @@ fn surface_stage(
     if let Some(b) = &budget {
         summary = summary.with_budget(b);
     }
+    if let Some(r) = &refined {
+        summary = summary.with_refined(r);
+    }
     Ok(SurfaceStage {
         solution,
         summary,
         budget,
+        refined,
+    })
+}
+
+/// [`crate::budget::refine::refine`] with the solution's numbers of terms
+/// fixed; a degree of freedom without a prior is an input error.
+fn refine_station(
+    obs: &Observations,
+    station: &Station,
+    uncertainty: &StationUncertainty,
+    dofs: &[Dof],
+    solution: &SurfaceSolution,
+    opts: &SurfaceOptions,
+) -> Result<Refined, SurfaceError> {
+    let terms = solution
+        .front
+        .coefficients_nm()
+        .len()
+        .max(solution.back.coefficients_nm().len());
+    let fixed = SurfaceOptions {
+        terms: Some(terms),
+        ..opts.clone()
+    };
+    refine(obs, station, uncertainty, dofs, &fixed).map_err(|e| match e {
+        RefineError::Surface(e) => e,
+        e @ RefineError::NoPrior { .. } => SurfaceError::Input {
+            what: "--refine",
+            problem: e.to_string(),
+        },
     })
 }
 
@@ -387,6 +458,17 @@ fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, Pipe
     let (sol, summary) = (&stage.solution, &stage.summary);
     let mut written = vec![out.join("surfaces.json")];
     surfaces_file(stage).save(&written[0])?;
+    if let Some(r) = &stage.refined {
+        // The refined station and its uncertainty, for the next measurement.
+        let path = out.join("station_refined.toml");
+        r.station.save(&path)?;
+        written.push(path);
+        let path = out.join("station_refined_uncertainty.toml");
+        let mut unc = r.uncertainty.clone();
+        unc.station = "station_refined.toml".into();
+        unc.save(&path)?;
+        written.push(path);
+    }
     let mut surfaces = vec![("front", &sol.front, &summary.front)];
     if let Some(back) = &summary.back {
         surfaces.push(("back", &sol.back, back));

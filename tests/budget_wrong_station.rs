@@ -85,6 +85,7 @@ fn reconstruct(
             ..SurfaceOptions::default()
         }),
         station_uncertainty: uncertainty,
+        refine: Vec::new(),
     };
     let rec = pipeline::reconstruct(
         Input::Acquisition(&mut acq),

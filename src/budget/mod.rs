@@ -21,6 +21,7 @@ pub mod fisher;
 pub mod linear;
 pub mod monte_carlo;
 pub mod picture;
+pub mod refine;
 pub mod scene;
 pub mod station_dual;
 pub mod table;

@@ -426,7 +426,7 @@ pub fn scene(
     })
 }
 
-/// The expected surfaces: from an `mfd-surfaces/1` file, or flat over the
+/// The expected surfaces: from an `mfd-surfaces/1` or `/2` file, or flat over the
 /// station's aperture.
 ///
 /// # Errors

@@ -35,7 +35,7 @@ pub struct BudgetArgs {
     /// An acquisition folder (mfd-acquisition/1): its frames are the schedule.
     #[arg(long)]
     acquisition: Option<PathBuf>,
-    /// The element's expected surfaces (mfd-surfaces/1); flat when omitted.
+    /// The element's expected surfaces (mfd-surfaces/1 or /2); flat when omitted.
     #[arg(long)]
     surfaces: Option<PathBuf>,
     /// Read noise, fraction of full scale, as `mfd simulate --noise`.

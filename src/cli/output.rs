@@ -128,6 +128,12 @@ fn print_surfaces(stage: &SurfaceStage) {
     if summary.station.is_none() {
         println!("  {}", summary.uncertainty_note);
     }
+    for r in &summary.refined {
+        println!(
+            "refined {}: {:+.6} from the station file, σ {:.3e} (prior {:.3e})",
+            r.name, r.change, r.posterior_std, r.prior_std
+        );
+    }
     if let Some(st) = &summary.station {
         let splits = [("front", Some(&st.front)), ("back", st.back.as_ref())];
         for (name, s) in splits.into_iter().filter_map(|(n, s)| Some((n, s?))) {
@@ -144,7 +150,7 @@ fn print_surfaces(stage: &SurfaceStage) {
                 format!(
                     "{} ±{} (front {:.2} nm, {:.0} %; back {:.2} nm, {:.0} %)",
                     s.name,
-                    s.std,
+                    short(s.std),
                     s.front_rms_nm,
                     100.0 * s.front_share,
                     s.back_rms_nm,
@@ -181,5 +187,14 @@ fn print_surfaces(stage: &SurfaceStage) {
             sol.rejected.len(),
             &sol.rejected[..sol.rejected.len().min(5)]
         );
+    }
+}
+
+/// A σ in at most four significant digits, exponent form below 1e-3.
+fn short(x: f64) -> String {
+    if x != 0.0 && x.abs() < 1e-3 {
+        format!("{x:.3e}")
+    } else {
+        format!("{}", (x * 1e4).round() / 1e4)
     }
 }

@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use mfd::acquire::acquisition::Acquisition;
-use mfd::optics::station::{Station, StationUncertainty};
+use mfd::optics::station::{Dof, Station, StationUncertainty};
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::find_station_uncertainty;
 use mfd::pipeline::{self, Input, Options, ScreenPoints};
@@ -44,10 +44,17 @@ pub struct ReconstructArgs {
     /// station used. surfaces.json's σ then include the station's
     /// geometry, and summary.json and uncertainty_breakdown.png give each
     /// surface's noise, station and total error and the degrees of freedom
-    /// that contribute most (one re-solve per degree of freedom). Without
+    /// that contribute most (the exact model's sensitivities). Without
     /// one the geometry counts as exact, and the results say so.
     #[arg(long)]
     uncertainty: Option<PathBuf>,
+    /// Estimate these degrees of freedom (spec names, comma-separated,
+    /// e.g. screen.rz_deg,element.thickness_mm) jointly with the surfaces,
+    /// the uncertainty file's σ their prior; writes station_refined.toml
+    /// and its uncertainty, and the estimates into summary.json. What the
+    /// data pin down (and what not): `mfd budget --json`'s identifiability.
+    #[arg(long, value_delimiter = ',', value_parser = parse_dof)]
+    refine: Vec<Dof>,
     /// Allow a third reflection (second internal round trip, paper §5.1b).
     #[arg(long)]
     third_reflection: bool,
@@ -103,6 +110,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         },
         surfaces,
         station_uncertainty,
+        refine: args.refine.clone(),
     };
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
@@ -137,6 +145,7 @@ fn from_screen_coords(
     let options = Options {
         surfaces,
         station_uncertainty,
+        refine: args.refine.clone(),
         ..Options::default()
     };
     let rec = pipeline::reconstruct(
@@ -184,4 +193,15 @@ fn out_help() -> String {
          uncertainty_breakdown.png (noise and station σ per Zernike term), summary.json.",
         bits.join(", ")
     )
+}
+
+/// A degree of freedom by its spec name (`--refine`).
+fn parse_dof(name: &str) -> Result<Dof, String> {
+    Dof::parse(name).ok_or_else(|| {
+        format!(
+            "\"{name}\" is not a degree of freedom of mfd-station-uncertainty/1 (e.g. {}, {})",
+            Dof::Thickness.name(),
+            Dof::ScreenRz.name()
+        )
+    })
 }

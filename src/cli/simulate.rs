@@ -20,7 +20,7 @@ pub struct SimulateArgs {
     /// Station geometry (mfd-station/1).
     #[arg(long)]
     station: PathBuf,
-    /// True front and back surfaces (mfd-surfaces/1); flat when omitted.
+    /// True front and back surfaces (mfd-surfaces/1 or /2); flat when omitted.
     #[arg(long, conflicts_with = "random_surfaces")]
     surfaces: Option<PathBuf>,
     /// Draw random surfaces with this seed instead: Noll terms 4–36 at

@@ -16,7 +16,7 @@ pub struct TraceArgs {
     /// Station geometry (mfd-station/1).
     #[arg(long)]
     station: PathBuf,
-    /// Front and back surfaces (mfd-surfaces/1); flat surfaces when omitted.
+    /// Front and back surfaces (mfd-surfaces/1 or /2); flat surfaces when omitted.
     #[arg(long)]
     surfaces: Option<PathBuf>,
     /// Output folder: screen_coords.npy [rows, cols, 2, 2] (u, v of front and

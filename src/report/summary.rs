@@ -11,6 +11,8 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
+use crate::budget::refine::Refined;
+
 use crate::budget::{Budget, DofEntry};
 use crate::solve::surfaces::report::{figures, SurfaceFigures, FIGURES_NOTE, REMOVED_TERMS};
 use crate::solve::surfaces::select::{TermChoice, CRITERION};
@@ -65,6 +67,23 @@ pub struct Summary {
     /// The station's uncertainty beside the noise, when one was given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub station: Option<StationPart>,
+    /// Degrees of freedom estimated with the surfaces (`--refine`), when
+    /// asked for; the figures above are those on the refined station.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refined: Vec<RefinedSummary>,
+}
+
+/// One degree of freedom estimated jointly with the surfaces.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RefinedSummary {
+    /// Its spec name.
+    pub name: String,
+    /// The estimate's change from the station file, in its unit.
+    pub change: f64,
+    /// Its 1σ before the data (the uncertainty file's).
+    pub prior_std: f64,
+    /// Its 1σ with the data.
+    pub posterior_std: f64,
 }
 
 /// What the station's uncertainty adds to each surface's error, beside the
@@ -270,7 +289,23 @@ impl Summary {
             seconds,
             uncertainty_note: UNCERTAINTY_NOISE_ONLY.into(),
             station: None,
+            refined: Vec::new(),
         }
+    }
+
+    /// The summary with the estimates of a refinement.
+    pub fn with_refined(mut self, refined: &Refined) -> Summary {
+        self.refined = refined
+            .estimates
+            .iter()
+            .map(|e| RefinedSummary {
+                name: e.dof.name().into(),
+                change: e.change,
+                prior_std: e.prior_std,
+                posterior_std: e.posterior_std,
+            })
+            .collect();
+        self
     }
 
     /// The summary with the station's part from `budget` (of the same
