@@ -4,20 +4,17 @@
 //! of freedom move the total, not the split), one colour for each of the six
 //! largest contributors and one for the rest; front and back side by side.
 //!
-//! Text is DejaVu Sans, embedded (the same file `report::plot` draws with;
-//! that module keeps its font registration to itself).
+//! Text is DejaVu Sans, embedded once in `report::plot` and registered
+//! from there.
 
 use std::path::Path;
 
 use plotters::prelude::*;
-use plotters::style::register_font;
 
 use super::table::total_std_nm;
 use super::Budget;
 
-/// DejaVu Sans (Bitstream Vera licence, `assets/fonts/LICENSE`).
-static DEJAVU_SANS: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
-const FAMILY: &str = "sans-serif";
+use crate::report::plot::{register_font, FAMILY};
 /// Contributors drawn in colours of their own.
 pub const TOP: usize = 6;
 const COLOURS: [RGBColor; TOP] = [
@@ -108,7 +105,7 @@ fn segments(all: &[Contributor], back: bool, k: usize, total: f64) -> Vec<(usize
 /// # Errors
 /// [`PictureError`] when the font or the drawing fails.
 pub fn budget_png(budget: &Budget, path: &Path, last_j: usize) -> Result<(), PictureError> {
-    register_font(FAMILY, FontStyle::Normal, DEJAVU_SANS).map_err(|_| PictureError::Font)?;
+    register_font().map_err(|_| PictureError::Font)?;
     let fail = |e: &dyn std::fmt::Display| PictureError::Draw {
         path: path.display().to_string(),
         problem: e.to_string(),

@@ -107,6 +107,9 @@ pub fn coefficients(
 /// A series' legend label and its points (Noll j, σ nm).
 type Labelled = (&'static str, Vec<(f64, f64)>);
 
+/// The breakdown's floor, a fraction of each panel's largest σ.
+const BREAKDOWN_FLOOR: f64 = 1e-6;
+
 /// `DIR/uncertainty_breakdown.png`: per Zernike term j = 4 … min(n, 36) the
 /// 1σ from the imaging noise and from the station's geometry (and both
 /// together), a panel per reconstructed surface, on a logarithmic σ axis.
@@ -157,6 +160,19 @@ pub fn breakdown(out: &Path, summary: &Summary) -> Result<Option<PathBuf>, PlotE
                 f.error_rms_nm
             ),
         };
+        // A log axis spans what matters: σ below 1e-6 of the panel's
+        // largest (rounding, or a term no degree of freedom reaches) are
+        // drawn at that floor, not 14 decades down.
+        let top = series
+            .iter()
+            .flat_map(|(_, p)| p.iter().map(|q| q.1))
+            .fold(0.0_f64, f64::max);
+        let floor = top * BREAKDOWN_FLOOR;
+        for (_, p) in &mut series {
+            for q in p.iter_mut() {
+                q.1 = q.1.max(floor);
+            }
+        }
         titles.push(title);
         data.push(series);
     }

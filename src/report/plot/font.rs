@@ -12,7 +12,7 @@ use super::PlotError;
 static DEJAVU_SANS: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
 
 /// The family every text style names.
-pub(super) const FAMILY: &str = "sans-serif";
+pub(crate) const FAMILY: &str = "sans-serif";
 /// Picture titles, in pixels.
 pub(super) const TITLE_PX: f64 = 22.0;
 /// Axis names and legends.
@@ -24,7 +24,7 @@ pub(super) const TICK_PX: f64 = 16.0;
 ///
 /// # Errors
 /// [`PlotError::Font`] if the font data cannot be parsed.
-pub(super) fn register() -> Result<(), PlotError> {
+pub(crate) fn register() -> Result<(), PlotError> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE.get_or_init(|| register_font(FAMILY, FontStyle::Normal, DEJAVU_SANS).is_ok());
     if ok {
