@@ -27,9 +27,9 @@ mod svg;
 
 use std::path::PathBuf;
 
+pub use chart::{coefficient_chart_png, coefficient_chart_svg, MAX_BARS};
 /// The embedded font, for the other pictures of the crate (`budget::picture`).
 pub(crate) use font::{register as register_font, FAMILY};
-pub use chart::{coefficient_chart_png, coefficient_chart_svg, MAX_BARS};
 pub use height_map::{height_map, height_map_png, height_map_svg, Extent, HeightMap};
 pub use lines::{line_plot_png, line_plot_svg, Panel, Series, MAX_SERIES};
 pub use output::Format;
