@@ -25,7 +25,7 @@ use crate::optics::station::{Station, StationUncertainty};
 use crate::optics::trace::Plate;
 use crate::solve::surfaces::path::LOCAL;
 use crate::solve::surfaces::problem::{fill_row, whitener, BasisAt, Layout};
-use crate::solve::surfaces::station_error::{DofShare, StationInduced};
+use crate::solve::surfaces::station_error::{from_columns, Columns, StationInduced};
 use crate::solve::surfaces::{
     Observation, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
 };
@@ -437,53 +437,26 @@ pub fn station_induced_linear(
 ) -> Result<StationInduced, SurfaceError> {
     let lin = linearise(obs, station, solution, opts)?;
     let per_unit = lin.sensitivity()?;
-    let m = uncertainty.names.len();
-    let sigmas: Vec<f64> = (0..m)
-        .map(|k| uncertainty.covariance[(k, k)].sqrt())
-        .collect();
     let (nf, nb) = (
         solution.front.coefficients_nm().len(),
         solution.back.coefficients_nm().len(),
     );
-    let mut jf = DMatrix::zeros(nf, m);
-    let mut jb = DMatrix::zeros(nb, m);
-    let mut shares = Vec::new();
-    for (k, &dof) in uncertainty.names.iter().enumerate() {
-        if sigmas[k] == 0.0 {
-            continue;
-        }
-        let (f, b) = lin.coefficients(&per_unit, dof as usize, solution);
-        let df = DVector::from_iterator(nf, f.iter().map(|x| x * sigmas[k]));
-        let db =
-            DVector::from_iterator(nb, (0..nb).map(|i| b.get(i).map_or(0.0, |x| x * sigmas[k])));
-        jf.set_column(k, &df);
-        jb.set_column(k, &db);
-        shares.push(DofShare {
-            dof,
-            std: sigmas[k],
-            front_rms_nm: df.rows_range(3.min(nf)..).norm(),
-            back_rms_nm: db.rows_range(3.min(nb)..).norm(),
-        });
-    }
-    let corr = DMatrix::from_fn(m, m, |r, c| {
-        let s = sigmas[r] * sigmas[c];
-        if s > 0.0 {
-            uncertainty.covariance[(r, c)] / s
-        } else {
-            0.0
-        }
-    });
-    let front_cov_nm2 = &jf * &corr * jf.transpose();
-    let back_cov_nm2 = &jb * &corr * jb.transpose();
-    shares.sort_by(|a, b| {
-        (b.front_rms_nm.hypot(b.back_rms_nm)).total_cmp(&a.front_rms_nm.hypot(a.back_rms_nm))
-    });
-    let from_defocus = |c: &DMatrix<f64>| (3..c.nrows()).map(|k| c[(k, k)]).sum::<f64>().sqrt();
-    Ok(StationInduced {
-        front_rms_nm: from_defocus(&front_cov_nm2),
-        back_rms_nm: from_defocus(&back_cov_nm2),
-        front_cov_nm2,
-        back_cov_nm2,
-        shares,
-    })
+    let columns: Columns = uncertainty
+        .names
+        .iter()
+        .enumerate()
+        .map(|(k, &dof)| {
+            let sigma = uncertainty.covariance[(k, k)].sqrt();
+            (sigma > 0.0).then(|| {
+                let (f, b) = lin.coefficients(&per_unit, dof as usize, solution);
+                let per_sigma = |v: &[f64], n: usize| -> Vec<f64> {
+                    (0..n)
+                        .map(|i| v.get(i).map_or(0.0, |x| x * sigma))
+                        .collect()
+                };
+                (per_sigma(&f, nf), per_sigma(&b, nb))
+            })
+        })
+        .collect();
+    Ok(from_columns(&columns, uncertainty, nf, nb))
 }

@@ -127,6 +127,18 @@ pub fn station_induced(
         base.back.coefficients_nm().len(),
     );
     let columns = station_induced_columns(obs, station, uncertainty, base, opts)?;
+    Ok(from_columns(&columns, uncertainty, nf, nb))
+}
+
+/// The station-induced covariance of per-σ columns (front `nf`, back `nb`
+/// long, in `uncertainty.names` order): `J Σ Jᵀ` with `Σ` the station's
+/// correlation, and each degree of freedom's share, largest first.
+pub fn from_columns(
+    columns: &Columns,
+    uncertainty: &StationUncertainty,
+    nf: usize,
+    nb: usize,
+) -> StationInduced {
     let m = uncertainty.names.len();
     let mut jf = DMatrix::zeros(nf, m);
     let mut jb = DMatrix::zeros(nb, m);
@@ -159,13 +171,13 @@ pub fn station_induced(
     shares.sort_by(|a, b| {
         (b.front_rms_nm.hypot(b.back_rms_nm)).total_cmp(&a.front_rms_nm.hypot(a.back_rms_nm))
     });
-    Ok(StationInduced {
+    StationInduced {
         front_rms_nm: trace_from_defocus(&front_cov_nm2),
         back_rms_nm: trace_from_defocus(&back_cov_nm2),
         front_cov_nm2,
         back_cov_nm2,
         shares,
-    })
+    }
 }
 
 /// RMS over the aperture of a coefficient change, piston and tilt removed
