@@ -33,7 +33,7 @@ use crate::solve::surfaces::{
 
 mod station_uncertainty;
 
-use crate::budget::linear::budget;
+use crate::budget::assemble::budget;
 use crate::budget::refine::{refine, RefineError, Refined};
 use crate::solve::surfaces::station_error::with_station;
 
@@ -224,7 +224,7 @@ pub struct Options {
     /// The surface stage's options; `None` stops after the spectral stage.
     pub surfaces: Option<SurfaceOptions>,
     /// The station's uncertainty: when given, the surface stage also
-    /// computes the error budget (`crate::budget::linear::budget`), and
+    /// computes the error budget (`crate::budget::assemble::budget`), and
     /// every reported σ includes the station's part; when `None` the
     /// geometry counts as exact and the results say so.
     pub station_uncertainty: Option<StationUncertainty>,

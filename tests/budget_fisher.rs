@@ -9,8 +9,9 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+use mfd::budget::assemble::budget;
 use mfd::budget::fisher::joint_step;
-use mfd::budget::linear::{budget, linearise};
+use mfd::budget::linear::linearise;
 use mfd::optics::station::{
     bench_station, CoverGlass, Distortion, Dof, Station, StationUncertainty,
 };

@@ -10,7 +10,7 @@
 
 use mfd::acquire::acquisition::FrameInfo;
 use mfd::acquire::patterns::Schedule;
-use mfd::budget::linear::budget;
+use mfd::budget::assemble::budget;
 use mfd::budget::monte_carlo::monte_carlo;
 use mfd::budget::scene::{scene, Radiometry, SceneOptions};
 use mfd::budget::table::{rss_j4, total_std_nm};

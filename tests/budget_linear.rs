@@ -7,7 +7,8 @@
 
 use nalgebra::{DMatrix, Vector3};
 
-use mfd::budget::linear::{budget, linearise, station_induced_linear};
+use mfd::budget::assemble::budget;
+use mfd::budget::linear::{linearise, station_induced_linear};
 use mfd::budget::station_dual::StationDual;
 use mfd::optics::station::{
     bench_station, CoverGlass, Distortion, Dof, Station, StationUncertainty,

@@ -1,5 +1,6 @@
-//! The budget of one solution: the sensitivities of its coefficients to the
-//! station's degrees of freedom, the noise covariance, the total.
+//! The reconstruction's linearisation at its solution: the sensitivities of
+//! its coefficients to the station's degrees of freedom, the noise
+//! covariance split by surface, the station-induced covariance.
 //!
 //! The sensitivities come from the reconstruction's linearisation at its
 //! solution: the weighted least-squares fit stops where `JᵀW r(c, θ) = 0`
@@ -20,7 +21,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use super::station_dual::{StationDual, DOFS, WIDTH};
-use super::{Budget, DofEntry, OtherEntry};
+use super::DofEntry;
 use crate::optics::station::{Station, StationUncertainty};
 use crate::optics::trace::Plate;
 use crate::solve::surfaces::path::LOCAL;
@@ -29,74 +30,6 @@ use crate::solve::surfaces::station_error::{from_columns, Columns, StationInduce
 use crate::solve::surfaces::{
     Observation, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
 };
-
-/// The name of the imaging-noise entry of [`Budget::others`].
-pub const IMAGING_NOISE: &str = "imaging noise";
-
-/// The budget of `solution` (solved from `obs` on `station`) under the
-/// station's `uncertainty`: each degree of freedom's sensitivity from the
-/// linearisation ([`linearise`]), the noise, the total, and what the data
-/// pin down ([`super::fisher`]).
-///
-/// # Errors
-/// [`SurfaceError::IllConditioned`] when the normal equations at the
-/// solution are not positive definite.
-pub fn budget(
-    obs: &Observations,
-    station: &Station,
-    uncertainty: &StationUncertainty,
-    solution: &SurfaceSolution,
-    opts: &SurfaceOptions,
-) -> Result<Budget, SurfaceError> {
-    let lin = linearise(obs, station, solution, opts)?;
-    let per_unit = lin.sensitivity()?;
-    let mut dofs: Vec<DofEntry> = Vec::new();
-    let mut keep = Vec::new();
-    for (k, &dof) in uncertainty.names.iter().enumerate() {
-        let std = uncertainty.covariance[(k, k)].sqrt();
-        if std > 0.0 {
-            let (front, back) = lin.coefficients(&per_unit, dof as usize, solution);
-            keep.push(k);
-            dofs.push(DofEntry {
-                dof,
-                std,
-                front_nm_per_unit: front,
-                back_nm_per_unit: back,
-            });
-        }
-    }
-    let nf = solution.front.coefficients_nm().len();
-    let nb = if solution.back_fitted {
-        solution.back.coefficients_nm().len()
-    } else {
-        0
-    };
-    let correlation = DMatrix::from_fn(keep.len(), keep.len(), |r, c| {
-        let (a, b) = (keep[r], keep[c]);
-        uncertainty.covariance[(a, b)] / (dofs[r].std * dofs[c].std)
-    });
-    let (noise_f, noise_b) = noise_covariances(solution, nf, nb);
-    let noise = OtherEntry {
-        name: IMAGING_NOISE.into(),
-        bias: false,
-        front_nm: (0..nf).map(|i| noise_f[(i, i)].max(0.0).sqrt()).collect(),
-        back_nm: (0..nb).map(|i| noise_b[(i, i)].max(0.0).sqrt()).collect(),
-    };
-    let front_total_cov_nm2 =
-        station_covariance(&dofs, &correlation, nf, |d| &d.front_nm_per_unit) + noise_f;
-    let back_total_cov_nm2 =
-        station_covariance(&dofs, &correlation, nb, |d| &d.back_nm_per_unit) + noise_b;
-    Ok(Budget {
-        terms: [nf, nb],
-        back_fitted: solution.back_fitted,
-        dofs,
-        correlation,
-        others: vec![noise],
-        front_total_cov_nm2,
-        back_total_cov_nm2,
-        identifiability: super::fisher::identifiability(&lin, uncertainty)?,
-    })
-}
 
 /// `S Σ Sᵀ` with `S` the per-σ contributions (n × m) and `Σ` the correlation.
 pub fn station_covariance(
@@ -427,7 +360,7 @@ impl Linearisation {
 /// sensitivity times its σ.
 ///
 /// # Errors
-/// As [`budget`].
+/// As [`super::assemble::budget`].
 pub fn station_induced_linear(
     obs: &Observations,
     station: &Station,

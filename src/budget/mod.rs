@@ -17,6 +17,7 @@
 //! - RMS figures over the aperture leave piston and tilt out (j ≥ 4), as
 //!   `expected_error_rms_nm` of `mfd-surfaces/2` does.
 
+pub mod assemble;
 pub mod fisher;
 pub mod linear;
 pub mod monte_carlo;

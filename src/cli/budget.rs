@@ -9,7 +9,7 @@ use clap::Args;
 
 use mfd::acquire::acquisition::Acquisition;
 use mfd::budget::scene::{self, Radiometry, SceneOptions};
-use mfd::budget::{linear, monte_carlo, picture, table};
+use mfd::budget::{assemble, monte_carlo, picture, table};
 use mfd::optics::station::{Station, StationUncertainty};
 
 /// Arguments of `mfd budget`.
@@ -132,7 +132,7 @@ pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
         sc.bound_stride_px,
         start.elapsed().as_secs_f64()
     );
-    let b = linear::budget(
+    let b = assemble::budget(
         &sc.observations,
         &station,
         &uncertainty,

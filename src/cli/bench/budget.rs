@@ -7,7 +7,7 @@ use std::time::Instant;
 use clap::Args;
 use nalgebra::DMatrix;
 
-use mfd::budget::linear::budget;
+use mfd::budget::assemble::budget;
 use mfd::optics::station::{Dof, Station, StationUncertainty};
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::sim::RandomSurfaceSpec;
