@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
 use mfd::live::{Counters, Measurement, Report, SequencerConfig, Start};
-use mfd::optics::station::Station;
+use mfd::optics::station::{Dof, Station};
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::{self, find_station_uncertainty, Input, Options};
 use mfd::sim::{MirroredDisplay, ScreenState, SimFaults, SimParams, SimulatedCamera};
@@ -32,6 +32,10 @@ pub struct MeasureArgs {
     /// without one the geometry counts as exact, and the result says so.
     #[arg(long)]
     uncertainty: Option<PathBuf>,
+    /// Degrees of freedom estimated jointly with the surfaces (spec names,
+    /// comma-separated), as `mfd reconstruct --refine`.
+    #[arg(long, value_delimiter = ',', value_parser = super::reconstruct::parse_dof)]
+    refine: Vec<Dof>,
     /// Camera: `sim`, `aravis` (first found), `aravis:ID`, `aravis:fake`
     /// (the simulated station behind a GigE Vision fake camera on loopback),
     /// `v4l:/dev/videoN`.
@@ -407,6 +411,7 @@ fn finish(
     let options = Options {
         surfaces,
         station_uncertainty,
+        refine: args.refine.clone(),
         ..Options::default()
     };
     let mut rec =

@@ -196,7 +196,7 @@ fn out_help() -> String {
 }
 
 /// A degree of freedom by its spec name (`--refine`).
-fn parse_dof(name: &str) -> Result<Dof, String> {
+pub(super) fn parse_dof(name: &str) -> Result<Dof, String> {
     Dof::parse(name).ok_or_else(|| {
         format!(
             "\"{name}\" is not a degree of freedom of mfd-station-uncertainty/1 (e.g. {}, {})",
