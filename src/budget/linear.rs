@@ -118,13 +118,8 @@ pub fn linearise(
     solution: &SurfaceSolution,
     opts: &SurfaceOptions,
 ) -> Result<Linearisation, SurfaceError> {
-    let smoothed;
-    let obs = if opts.covariance_smoothing_px > 0 && obs.sigma_known {
-        smoothed = obs.smoothed_covariance(opts.covariance_smoothing_px);
-        &smoothed
-    } else {
-        obs
-    };
+    let weighted = opts.weighted(obs);
+    let obs = &*weighted;
     let rejected: HashSet<[u32; 2]> = solution.rejected.iter().copied().collect();
     let pixels: Vec<Observation> = obs
         .pixels

@@ -16,12 +16,11 @@ use rayon::prelude::*;
 use serde::Deserialize;
 
 use crate::acquire::acquisition::FrameInfo;
-use crate::acquire::patterns::FringeAxis;
 use crate::optics::station::{Dof, Station, StationUncertainty};
 use crate::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use crate::optics::zernike::ZernikeSurface;
 use crate::solve::spectral::bound::truth_cov_map;
-use crate::solve::spectral::model::{Axis, Design, FrameMeta};
+use crate::solve::spectral::model::Design;
 use crate::solve::surfaces::{
     reconstruct, Observations, SurfaceError, SurfaceOptions, SurfaceSolution, Uncertainty,
 };
@@ -154,52 +153,14 @@ pub fn load_schedule(path: &Path) -> Result<Vec<FrameInfo>, BudgetError> {
     Ok(frames)
 }
 
-/// The spectral model's view of a schedule on `station`'s screen (the same
-/// construction as the spectral solver's, which builds it only together
-/// with its per-pixel state).
+/// The spectral model's view of a schedule on `station`'s screen
+/// ([`crate::solve::spectral::design`], the solver's own construction).
 ///
 /// # Errors
 /// [`BudgetError::Invalid`] when the directions are (nearly) parallel.
 pub fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, BudgetError> {
-    let mut directions_deg: Vec<f64> = Vec::new();
-    let mut metas = Vec::with_capacity(frames.len());
-    for f in frames {
-        let dir = directions_deg
-            .iter()
-            .position(|&d| d == f.direction_deg)
-            .unwrap_or_else(|| {
-                directions_deg.push(f.direction_deg);
-                directions_deg.len() - 1
-            });
-        metas.push(FrameMeta {
-            tau: f.tau,
-            phase_cycles: f.phase_rad / std::f64::consts::TAU,
-            dir,
-        });
-    }
-    let (w, h) = (station.screen.width, station.screen.height);
-    let axes: Vec<Axis> = directions_deg
-        .iter()
-        .map(|&d| Axis::from_fringe(&FringeAxis::new(d, w, h)))
-        .collect();
-    let spread = axes
-        .iter()
-        .flat_map(|a| {
-            axes.iter()
-                .map(move |b| (a.a * b.b - a.b * b.a).abs() / (a.a.hypot(a.b) * b.a.hypot(b.b)))
-        })
-        .fold(0.0, f64::max);
-    if spread < 0.1 {
-        return Err(invalid(
-            "the schedule",
-            format!("directions {directions_deg:?} are (nearly) parallel: two non-parallel fringe directions are needed"),
-        ));
-    }
-    Ok(Design {
-        frames: metas,
-        axes,
-        directions_deg,
-    })
+    crate::solve::spectral::design(station, frames)
+        .map_err(|e| invalid("the schedule", e.to_string()))
 }
 
 /// The camera's radiometry, as `mfd simulate` renders it (`sim::render`):

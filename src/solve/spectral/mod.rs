@@ -46,7 +46,7 @@ pub use config::{Engine, SpectralConfig, SpectralError, SERIES_LIMIT_BYTES};
 pub use maps::SpectralMaps;
 pub use prior::flat_plate_prior;
 pub use statistics::StatisticsError;
-pub use stream::SpectralSolver;
+pub use stream::{design, SpectralSolver};
 
 use nalgebra::DMatrix;
 

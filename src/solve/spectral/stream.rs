@@ -423,7 +423,13 @@ fn statistics(
     .map_err(|source| SpectralError::Statistics { source })
 }
 
-fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, SpectralError> {
+/// The spectral model's view of a schedule (`frames` in capture order) on
+/// `station`'s screen: each frame's τ, phase and direction index, and the
+/// fringe axis of every direction.
+///
+/// # Errors
+/// [`SpectralError::Schedule`] when the directions are (nearly) parallel.
+pub fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, SpectralError> {
     let mut directions_deg: Vec<f64> = Vec::new();
     let mut metas = Vec::with_capacity(frames.len());
     for f in frames {

@@ -51,6 +51,18 @@ impl Default for SurfaceOptions {
     }
 }
 
+impl SurfaceOptions {
+    /// `obs` as the solve weights them: the covariance smoothed over
+    /// [`SurfaceOptions::covariance_smoothing_px`] when the σ are known.
+    pub fn weighted<'a>(&self, obs: &'a Observations) -> std::borrow::Cow<'a, Observations> {
+        if self.covariance_smoothing_px > 0 && obs.sigma_known {
+            std::borrow::Cow::Owned(obs.smoothed_covariance(self.covariance_smoothing_px))
+        } else {
+            std::borrow::Cow::Borrowed(obs)
+        }
+    }
+}
+
 /// One stage's account.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Stage {
@@ -115,13 +127,8 @@ pub fn reconstruct(
     // Everything is fitted in the element's own frame (station v2's pose);
     // `obs` were built in it by `Observations::from_maps`.
     let station = &station.element_frame();
-    let smoothed;
-    let obs = if opts.covariance_smoothing_px > 0 && obs.sigma_known {
-        smoothed = obs.smoothed_covariance(opts.covariance_smoothing_px);
-        &smoothed
-    } else {
-        obs
-    };
+    let weighted = opts.weighted(obs);
+    let obs = &*weighted;
     let (terms, mut plate, mut stages) = front_stage(obs, station, opts)?;
     let mut layout = Layout {
         front_terms: terms,
