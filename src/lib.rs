@@ -37,12 +37,15 @@
 pub mod acquire;
 pub mod budget;
 pub mod calibrate;
+pub mod compare;
+pub mod console;
 pub mod conventions;
 pub mod formats;
 pub mod kernels;
 pub mod live;
 pub mod optics;
 pub mod pipeline;
+pub mod plan;
 pub mod report;
 pub mod sim;
 pub mod solve;
