@@ -31,7 +31,10 @@ use crate::solve::surfaces::{
     Uncertainty,
 };
 
+mod estimator;
 mod station_uncertainty;
+
+pub use estimator::{withheld, DirectReport, Estimator};
 
 use crate::budget::assemble::budget;
 use crate::budget::refine::{refine, RefineError, Refined};
@@ -232,6 +235,12 @@ pub struct Options {
     /// uncertainty their prior ([`crate::budget::refine`]); each needs a σ
     /// there. Empty: the station is taken as given.
     pub refine: Vec<Dof>,
+    /// Which estimator makes the surfaces from the frames.
+    pub estimator: Estimator,
+    /// A surface whose expected RMS error exceeds this (nm) is reported as
+    /// not reconstructed, with the reason; `None`: only the rule of
+    /// [`withheld`] (an expected error as large as the surface).
+    pub max_expected_nm: Option<f64>,
 }
 
 /// The spectral stage's result.
@@ -262,6 +271,11 @@ pub struct SurfaceStage {
     /// the refined station, the estimates; the solution and the budget
     /// above are those on the refined station.
     pub refined: Option<Refined>,
+    /// The surface-domain fit's account, when it made the surfaces.
+    pub direct: Option<DirectReport>,
+    /// Why a surface (front, back) is reported as not reconstructed, where
+    /// it is ([`withheld`]).
+    pub withheld: [Option<String>; 2],
 }
 
 /// A reconstruction: whichever stages ran.
@@ -291,7 +305,8 @@ pub fn reconstruct(
     // Every stage works in the element's own frame (station v2's pose);
     // the surfaces come out in it, as the spec reports them.
     let station = &station.element_frame();
-    let first = match input {
+    let owned;
+    let (first, solver): (First, Option<&SpectralSolver>) = match input {
         Input::Acquisition(acq) => {
             let t0 = Instant::now();
             acq.check_resolution(station.camera.width, station.camera.height)?;
@@ -304,15 +319,20 @@ pub fn reconstruct(
                 solver.push_frame(index, &frame)?;
                 progress(k + 1, total);
             }
-            First::Spectral(spectral_stage(&mut solver, t0.elapsed().as_secs_f64())?)
+            let stage = spectral_stage(&mut solver, t0.elapsed().as_secs_f64())?;
+            owned = solver;
+            (First::Spectral(stage), Some(&owned))
         }
-        Input::Streamed(solver) => First::Spectral(spectral_stage(solver, 0.0)?),
-        Input::ScreenPoints(points) => First::Points(points),
+        Input::Streamed(solver) => (
+            First::Spectral(spectral_stage(solver, 0.0)?),
+            Some(&*solver),
+        ),
+        Input::ScreenPoints(points) => (First::Points(points), None),
     };
-    let surfaces = options.surfaces.as_ref().map(|opts| {
-        let unc = options.station_uncertainty.as_ref();
-        surface_stage(&first, station, opts, unc, &options.refine)
-    });
+    let surfaces = options
+        .surfaces
+        .as_ref()
+        .map(|opts| surface_stage(&first, solver, station, opts, options));
     let spectral = match first {
         First::Spectral(s) => Some(s),
         First::Points(_) => None,
@@ -328,20 +348,30 @@ enum First {
 
 fn surface_stage(
     first: &First,
+    solver: Option<&SpectralSolver>,
     station: &Station,
     opts: &SurfaceOptions,
-    uncertainty: Option<&StationUncertainty>,
-    refine: &[Dof],
+    options: &Options,
 ) -> Result<SurfaceStage, SurfaceError> {
+    let (uncertainty, refine) = (options.station_uncertainty.as_ref(), &options.refine[..]);
     let t = Instant::now();
-    let obs = match first {
-        First::Spectral(s) => {
-            let cov = s.maps.screen_cov();
-            Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?
+    let (obs, mut solution, direct) = match (first, solver) {
+        (First::Spectral(s), Some(solver)) => {
+            estimator::surfaces_from_frames(solver, &s.maps, station, opts, options.estimator)?
         }
-        First::Points(p) => Observations::from_maps(station, &p.coords, p.uncertainty())?,
+        (First::Spectral(s), None) => {
+            let cov = s.maps.screen_cov();
+            let obs =
+                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?;
+            let sol = solve_surfaces(&obs, station, opts)?;
+            (obs, sol, None)
+        }
+        (First::Points(p), _) => {
+            let obs = Observations::from_maps(station, &p.coords, p.uncertainty())?;
+            let sol = solve_surfaces(&obs, station, opts)?;
+            (obs, sol, None)
+        }
     };
-    let mut solution = solve_surfaces(&obs, station, opts)?;
     let refined = match uncertainty {
         Some(u) if !refine.is_empty() => {
             let r = refine_station(&obs, station, u, refine, &solution, opts)?;
@@ -378,11 +408,18 @@ fn surface_stage(
     if let Some(r) = &refined {
         summary = summary.with_refined(r);
     }
+    if let Some(d) = &direct {
+        summary = summary.with_direct(d);
+    }
+    let withheld = withheld(&summary, direct.as_ref(), options.max_expected_nm);
+    summary.withheld = withheld.clone();
     Ok(SurfaceStage {
         solution,
         summary,
         budget,
         refined,
+        direct,
+        withheld,
     })
 }
 
@@ -469,8 +506,28 @@ fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, Pipe
         unc.save(&path)?;
         written.push(path);
     }
-    let mut surfaces = vec![("front", &sol.front, &summary.front)];
-    if let Some(back) = &summary.back {
+    if let Some(d) = &stage.direct {
+        // The surface-domain fit's per-pixel maps: the points its surfaces
+        // predict, and each pixel's pull against them (a defect the
+        // Zernike model cannot follow shows there).
+        let (w, h) = (d.width, d.chi2_map.len() / d.width.max(1));
+        let path = out.join("direct_screen_coords.npy");
+        npy::write_f64(&path, &[h, w, 2, 2], &d.predicted)?;
+        written.push(path);
+        let path = out.join("direct_chi2.npy");
+        npy::write_f64(&path, &[h, w], &d.chi2_map)?;
+        written.push(path);
+    }
+    // A withheld surface gets no height map or picture.
+    let mut surfaces = Vec::new();
+    if stage.withheld[0].is_none() {
+        surfaces.push(("front", &sol.front, &summary.front));
+    }
+    if let Some(back) = summary
+        .back
+        .as_ref()
+        .filter(|_| stage.withheld[1].is_none())
+    {
         surfaces.push(("back", &sol.back, back));
     }
     for (name, surface, figures) in surfaces {
@@ -534,16 +591,17 @@ pub fn surfaces_file(stage: &SurfaceStage) -> SurfacesFile {
             expected_error_rms_nm: expected,
         })
     };
-    let back = if sol.back_fitted {
-        entry(&sol.back, true)
-    } else {
-        SurfaceEntry::NotReconstructed {
-            because: Some(BACK_NOT_RECONSTRUCTED.into()),
-        }
+    let not = |because: &str| SurfaceEntry::NotReconstructed {
+        because: Some(because.into()),
     };
-    SurfacesFile::v2(
-        ZernikeSpec::of(sol.front.basis()),
-        entry(&sol.front, false),
-        back,
-    )
+    let front = match &stage.withheld[0] {
+        Some(why) => not(why),
+        None => entry(&sol.front, false),
+    };
+    let back = match (&stage.withheld[1], sol.back_fitted) {
+        (_, false) => not(BACK_NOT_RECONSTRUCTED),
+        (Some(why), true) => not(why),
+        (None, true) => entry(&sol.back, true),
+    };
+    SurfacesFile::v2(ZernikeSpec::of(sol.front.basis()), front, back)
 }

@@ -86,6 +86,7 @@ fn reconstruct(
         }),
         station_uncertainty: uncertainty,
         refine: Vec::new(),
+        ..Options::default()
     };
     let rec = pipeline::reconstruct(
         Input::Acquisition(&mut acq),

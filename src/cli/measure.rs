@@ -408,10 +408,13 @@ fn finish(
         }
         None => None,
     };
+    let (estimator, max_expected_nm) = args.surfaces.estimator()?;
     let options = Options {
         surfaces,
         station_uncertainty,
         refine: args.refine.clone(),
+        estimator,
+        max_expected_nm,
         ..Options::default()
     };
     let mut rec =

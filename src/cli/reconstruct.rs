@@ -98,6 +98,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| acq.station_path().to_path_buf());
     let station = Station::load(&station_path)?;
     let station_uncertainty = uncertainty(args, &station_path, &station, surfaces.is_some())?;
+    let (estimator, max_expected_nm) = args.surfaces.estimator()?;
     let options = Options {
         spectral: SpectralConfig {
             tau_max_guess: args.tau_max_guess,
@@ -111,6 +112,8 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         surfaces,
         station_uncertainty,
         refine: args.refine.clone(),
+        estimator,
+        max_expected_nm,
     };
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")

@@ -25,9 +25,31 @@ pub struct SurfaceArgs {
     /// Skip the surface stage (spectral maps only).
     #[arg(long)]
     pub no_surfaces: bool,
+    /// Which estimator makes the surfaces from the frames: auto (the
+    /// surface-domain fit, started from the per-pixel surfaces where those
+    /// exist), per-pixel (screen points per pixel, then the surfaces) or
+    /// direct (the surface-domain fit, an error where it cannot run).
+    #[arg(long, value_enum, default_value_t = mfd::pipeline::Estimator::Auto)]
+    pub estimator: mfd::pipeline::Estimator,
+    /// Report a surface as not reconstructed (with the reason) when its
+    /// expected RMS error exceeds this, nm; without it, only when the
+    /// expected error is as large as the fitted surface.
+    #[arg(long)]
+    pub max_expected_nm: Option<f64>,
 }
 
 impl SurfaceArgs {
+    /// The estimator and the reporting limit, checked.
+    pub fn estimator(&self) -> anyhow::Result<(mfd::pipeline::Estimator, Option<f64>)> {
+        if let Some(l) = self.max_expected_nm {
+            anyhow::ensure!(
+                l.is_finite() && l > 0.0,
+                "--max-expected-nm {l}: must be a positive number of nm"
+            );
+        }
+        Ok((self.estimator, self.max_expected_nm))
+    }
+
     /// The solver options these arguments ask for.
     pub fn options(&self, edge_margin_mm: f64) -> anyhow::Result<SurfaceOptions> {
         if let Some(t) = self.terms {

@@ -71,6 +71,39 @@ pub struct Summary {
     /// asked for; the figures above are those on the refined station.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub refined: Vec<RefinedSummary>,
+    /// Which estimator made the surfaces: "per-pixel" (screen points per
+    /// pixel, then the surfaces) or "surface-domain" (fitted to the frames).
+    #[serde(default = "per_pixel")]
+    pub estimator: String,
+    /// The surface-domain fit's account, when it made the surfaces.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direct: Option<DirectSummary>,
+    /// Why the front and back are reported as not reconstructed, where
+    /// they are (`surfaces.json`'s `not_reconstructed_because`).
+    #[serde(default)]
+    pub withheld: [Option<String>; 2],
+}
+
+fn per_pixel() -> String {
+    "per-pixel".into()
+}
+
+/// The surface-domain fit (`solve::direct`) in `summary.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DirectSummary {
+    /// What it is, in words.
+    pub note: String,
+    /// Whether its step criterion was met.
+    pub converged: bool,
+    /// Pixels fitted with two reflections.
+    pub two_reflection_pixels: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// Per outer iteration: objective, terms, step fraction, step in σ.
+    pub iterations: Vec<crate::solve::direct::Iteration>,
+    /// The per-pixel route's failure, where it measured nothing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_pixel_failed: Option<String>,
 }
 
 /// One degree of freedom estimated jointly with the surfaces.
@@ -158,6 +191,12 @@ and the station's geometry uncertainty (the station part below)";
 pub const UNCERTAINTY_NOISE_ONLY: &str = "sigma and expected errors are the imaging noise alone: \
 the station's geometry was taken as exact (no station uncertainty was given or found beside the \
 station file); a real station's geometry error is not included";
+
+/// What the surface-domain fit is, for `summary.json`.
+pub const DIRECT_NOTE: &str = "surfaces fitted to the frames: every pixel's exact likelihood at \
+the screen points the surfaces predict, its background, amplitudes and falloff profiled out; \
+sigma from the global Fisher information. `pixels` counts the pixels fitted; \
+direct_screen_coords.npy holds the predicted points, direct_chi2.npy each pixel's pull";
 
 /// Pixels that entered the surface stage.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
@@ -290,7 +329,24 @@ impl Summary {
             uncertainty_note: UNCERTAINTY_NOISE_ONLY.into(),
             station: None,
             refined: Vec::new(),
+            estimator: per_pixel(),
+            direct: None,
+            withheld: [None, None],
         }
+    }
+
+    /// The summary of a solution the surface-domain fit made.
+    pub fn with_direct(mut self, d: &crate::pipeline::DirectReport) -> Summary {
+        self.estimator = "surface-domain".into();
+        self.direct = Some(DirectSummary {
+            note: DIRECT_NOTE.into(),
+            converged: d.converged,
+            two_reflection_pixels: d.two_reflection_pixels,
+            seconds: d.seconds,
+            iterations: d.iterations.clone(),
+            per_pixel_failed: d.per_pixel_failed.clone(),
+        });
+        self
     }
 
     /// The summary with the estimates of a refinement.

@@ -4,6 +4,7 @@ mod budget;
 mod extremes;
 mod surfaces;
 mod thickness;
+mod thin;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -57,6 +58,11 @@ enum BenchKind {
     /// JSON line: solve_s, budget_s (separately), pixels, terms, the
     /// station-induced RMS of each surface.
     Budget(budget::BudgetBenchArgs),
+    /// Both surface estimators (per-pixel, surface-domain) over plate
+    /// thickness and index from rendered frames (48×48 station, paper
+    /// schedule), against the surfaces' Cramér–Rao bound and against what
+    /// each reports: one JSON line per plate, or a markdown table.
+    Thin(thin::ThinArgs),
 }
 
 #[derive(Args)]
@@ -102,6 +108,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchKind::Surfaces(a) => surfaces::run(a),
         BenchKind::Extremes(a) => extremes::run(a),
         BenchKind::Budget(a) => budget::run(a),
+        BenchKind::Thin(a) => thin::run(a),
     }
 }
 

@@ -151,7 +151,7 @@ pub struct Normal {
 
 /// Model value and its gradient row for frame `f` (gradient into `row`).
 #[inline]
-fn eval_row(design: &Design, f: &FrameMeta, p: &Params, row: &mut [f64]) -> f64 {
+pub(crate) fn eval_row(design: &Design, f: &FrameMeta, p: &Params, row: &mut [f64]) -> f64 {
     let ax = design.axes[f.dir];
     let t = f.tau;
     let e = (-p.kappa * t * t).exp();

@@ -7,7 +7,7 @@ use std::thread::JoinHandle;
 
 use super::batch::{CpuFits, FitBackend, FitBatch, FitSettings};
 use super::maps::SpectralMaps;
-use super::model::{Axis, Design, FrameMeta};
+use super::model::{Axis, Design, FrameMeta, Samples, SeriesSamples};
 use super::periodogram::SpectrumPlans;
 use super::phase::{self, PhaseModel, PhaseSchedule, PhaseSettings, Response};
 use super::pixel::PixelFits;
@@ -390,6 +390,53 @@ impl SpectralSolver {
     /// The geometry prior (flat surfaces through the nominal station).
     pub fn prior(&self) -> &TracedView {
         &self.prior.view
+    }
+
+    /// Camera pixel index (row-major) of every candidate, in candidate order.
+    pub fn candidates(&self) -> &[u32] {
+        &self.prior.candidates
+    }
+
+    /// Whether candidate `q`'s back offset was borrowed from its neighbours
+    /// at the rim (the flat plate's back path leaves through the edge there).
+    pub fn borrowed(&self, q: usize) -> bool {
+        self.prior.borrowed[q].is_some()
+    }
+
+    /// Starting κ = 1/τ_max² of the fits.
+    pub fn kappa_start(&self) -> f64 {
+        self.config.kappa_start(&self.design)
+    }
+
+    /// `f` of candidate `q`'s samples as the fits see them (its series, or
+    /// its statistics with that engine; clipped samples left out), with
+    /// the number left out; `None` where the pixel has too many clipped
+    /// samples to be fitted, or the schedule is a phase-shifting one (its
+    /// path keeps no per-pixel model of this kind).
+    pub fn with_samples<R>(&self, q: usize, f: impl FnOnce(&dyn Samples, usize) -> R) -> Option<R> {
+        if self.phase.is_some() || q >= self.prior.candidates.len() {
+            return None;
+        }
+        let sat = self.saturation();
+        if let Some(stats) = &self.stats {
+            let (data, excluded) = stats.samples(&self.design, q, sat)?;
+            return Some(f(&data, excluded));
+        }
+        let n = self.frames();
+        let mut excluded = 0;
+        let y: Vec<f64> = self.series[q * n..(q + 1) * n]
+            .iter()
+            .map(|&v| {
+                if v == 0 || sat.is_some_and(|s| v >= s) {
+                    excluded += 1;
+                    f64::NAN
+                } else {
+                    f64::from(v)
+                }
+            })
+            .collect();
+        let data = SeriesSamples::new(&self.design, &self.plans, &y, self.kappa_start());
+        Some(f(&data, excluded))
     }
 }
 
