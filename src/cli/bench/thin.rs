@@ -69,6 +69,9 @@ struct Figures {
 /// Runs `mfd bench thin`.
 pub fn run(args: &ThinArgs) -> anyhow::Result<()> {
     if args.markdown {
+        if args.noise == 0.0 {
+            println!("Noise-free: the error columns give the errors in nm (there is no bound).\n");
+        }
         println!(
             "| t (mm) | n | S2−S1 (bins) | bound front / back (nm) | per-pixel error/bound | \
              surface-domain error/bound | error/reported | RMS(error/σ) | iterations | s |"
@@ -277,7 +280,11 @@ fn print_row(
 ) {
     let p = pooled(pp);
     let d = pooled(dd);
-    let ratio = |e: [f64; 2], b: [f64; 2]| [e[0] / b[0], e[1] / b[1]];
+    // Noise-free (no bound): the errors themselves, nm.
+    let ratio = |e: [f64; 2], b: [f64; 2]| {
+        let r = |e: f64, b: f64| if b > 0.0 { e / b } else { e };
+        [r(e[0], b[0]), r(e[1], b[1])]
+    };
     if args.markdown {
         let cell = |r: Option<[f64; 2]>| match r {
             Some(r) => format!("{:.2} / {:.2}", r[0], r[1]),
