@@ -86,6 +86,11 @@ struct SpectralBenchArgs {
     /// discontinuities).
     #[arg(long)]
     search_every_pixel: bool,
+    /// Also time the surfaces after the spectral stage: the per-pixel
+    /// route and the surface-domain fit started from it (direct_s,
+    /// direct_iterations, full_sensor_direct_s at the measured rate per pixel).
+    #[arg(long)]
+    direct: bool,
 }
 
 #[derive(Args)]
@@ -159,8 +164,14 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     // pixel and frame): the goal is ≤ 10 s and ≤ 4 GiB.
     let scale = n_pix as f64 / fitted.max(1) as f64;
     let nodes = solver.statistics_nodes();
+    let surfaces = if args.direct {
+        direct_timing(&solver, &maps, &station, scale)?
+    } else {
+        serde_json::Value::Null
+    };
     print_json(&serde_json::json!({
         "bench": "spectral",
+        "surfaces": surfaces,
         "station": args.station.display().to_string(),
         "pixels": fitted,
         "sensor_pixels": n_pix,
@@ -182,6 +193,43 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
         "warm_starts": !args.search_every_pixel,
     }));
     Ok(())
+}
+
+/// The per-pixel surfaces and the surface-domain fit from them, timed.
+fn direct_timing(
+    solver: &mfd::solve::spectral::SpectralSolver,
+    maps: &mfd::solve::spectral::SpectralMaps,
+    station: &Station,
+    scale: f64,
+) -> anyhow::Result<serde_json::Value> {
+    use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
+    let station = station.element_frame();
+    let opts = SurfaceOptions::default();
+    let t = std::time::Instant::now();
+    let cov = maps.screen_cov();
+    let obs = Observations::from_maps(&station, &maps.screen_coords(), Uncertainty::Cov(&cov))?;
+    let per_pixel = reconstruct(&obs, &station, &opts);
+    let per_pixel_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let d = mfd::solve::direct::solve(
+        solver,
+        maps,
+        &station,
+        per_pixel.as_ref().ok(),
+        &opts,
+        &mfd::solve::direct::DirectOptions::default(),
+    )?;
+    let direct_s = t.elapsed().as_secs_f64();
+    let surface_s: f64 = d.solution.stages.iter().map(|s| s.seconds).sum();
+    Ok(serde_json::json!({
+        "per_pixel_surfaces_s": round(per_pixel_s, 2),
+        "direct_s": round(direct_s, 2),
+        "direct_iterations": d.iterations.len(),
+        "direct_converged": d.converged,
+        "terms": [d.solution.front.coefficients_nm().len(), d.solution.back.coefficients_nm().len()],
+        "last_surface_solve_s": round(surface_s, 2),
+        "full_sensor_direct_s": round(direct_s * scale, 0),
+    }))
 }
 
 /// The solver's ingest alone, ms per frame, with no frames rendered beside
