@@ -42,6 +42,8 @@ enum Command {
     Calibrate(cli::calibrate::CalibrateArgs),
     /// Error budget: every degree of freedom's effect on every Zernike term (paper Tables 1–4).
     Budget(cli::budget::BudgetArgs),
+    /// The operator's console over finished result folders (pictures, summary.json).
+    Serve(cli::serve::ServeArgs),
 }
 
 /// The library's diagnostics (`log`) on stderr: warnings and errors with
@@ -93,6 +95,7 @@ fn main() -> std::process::ExitCode {
         Command::Measure(args) => cli::measure::run(&args),
         Command::Calibrate(args) => cli::calibrate::run(&args),
         Command::Budget(args) => cli::budget::run(&args),
+        Command::Serve(args) => cli::serve::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

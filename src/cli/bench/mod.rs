@@ -1,6 +1,7 @@
 //! `mfd bench`: benchmarks that print machine-readable figures.
 
 mod budget;
+mod console;
 mod extremes;
 mod surfaces;
 mod thickness;
@@ -57,6 +58,11 @@ enum BenchKind {
     /// JSON line: solve_s, budget_s (separately), pixels, terms, the
     /// station-induced RMS of each surface.
     Budget(budget::BudgetBenchArgs),
+    /// A simulated measurement (recorder on disk) without the console and
+    /// with a console serving a slow client (previews read slowly, stalled
+    /// WebSockets); prints one JSON line: each run's frames/s, waits on
+    /// consumers, re-shoots and exposure margins, and what the client got.
+    Console(console::ConsoleBenchArgs),
 }
 
 #[derive(Args)]
@@ -102,6 +108,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchKind::Surfaces(a) => surfaces::run(a),
         BenchKind::Extremes(a) => extremes::run(a),
         BenchKind::Budget(a) => budget::run(a),
+        BenchKind::Console(a) => console::run(a),
     }
 }
 
