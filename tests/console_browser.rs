@@ -84,9 +84,9 @@ fn the_page_shows_the_live_measurement_and_stops_it() {
     );
     let tmp = tempfile::tempdir().unwrap();
     let station = console_support::station();
-    // 40 τ × 6 = 240 patterns at ≥ 40 ms each: still running when the page
-    // has shown a few frames and its stop button is pressed.
-    let patterns = console_support::patterns(40);
+    // 150 τ × 2 directions = 300 patterns at ≥ 40 ms each: still running
+    // when the page has shown a few frames and its stop button is pressed.
+    let patterns = console_support::patterns(150);
     let total = patterns.len();
     let dir = tmp.path().join("acquisition");
     let mut m = console_support::measurement(
@@ -110,6 +110,7 @@ fn the_page_shows_the_live_measurement_and_stops_it() {
     let profile = tmp.path().join("chromium-profile");
     let shot = tmp.path().join("console.png");
     let ended = AtomicBool::new(false);
+    let page_ready = AtomicBool::new(false);
     let report = std::thread::scope(|s| {
         let browser = s.spawn(|| {
             let rt = tokio::runtime::Builder::new_multi_thread()
@@ -122,9 +123,16 @@ fn the_page_shows_the_live_measurement_and_stops_it() {
                 results: &results,
                 total,
                 ended: &ended,
+                page_ready: &page_ready,
             };
             rt.block_on(drive(&url, &profile, &shot, run))
         });
+        // The run starts once the page is connected (a slow browser start
+        // must not find it over).
+        let t0 = Instant::now();
+        while !page_ready.load(Ordering::SeqCst) && t0.elapsed() < Duration::from_secs(60) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
         let report = m.run(&stop, &mut |_| {});
         ended.store(true, Ordering::SeqCst);
         (report.unwrap(), browser.join().unwrap())
@@ -171,6 +179,7 @@ struct Run<'a> {
     results: &'a Path,
     total: usize,
     ended: &'a AtomicBool,
+    page_ready: &'a AtomicBool,
 }
 
 /// Drives the page: waits for the preview and progress to move, presses
@@ -182,11 +191,17 @@ async fn drive(url: &str, profile: &Path, shot: &Path, run: Run<'_>) -> (usize, 
         results,
         total,
         ended,
+        page_ready,
     } = run;
     let (mut browser, mut handler) = Browser::launch(launch_config(profile)).await.unwrap();
     let events = tokio::spawn(async move { while let Some(Ok(_)) = handler.next().await {} });
     let page = browser.new_page(url).await.unwrap();
     let limit = Duration::from_secs(60);
+    until(&page, limit, "a status message", |s| {
+        s["statusMessages"].as_u64() >= Some(1)
+    })
+    .await;
+    page_ready.store(true, Ordering::SeqCst);
 
     let first = until(&page, limit, "a preview and progress", |s| {
         s["previews"].as_u64() >= Some(1) && s["status"]["progress"]["done"].as_u64() >= Some(1)
@@ -233,16 +248,23 @@ async fn drive(url: &str, profile: &Path, shot: &Path, run: Run<'_>) -> (usize, 
             && s["results"][0]["files"][0]["name"] == "tradeoff.png"
     })
     .await;
-    let loaded: bool = page
-        .evaluate(
-            "(() => { const i = document.querySelector('#results img'); \
-                   return !!i && i.complete && i.naturalWidth > 0; })()",
-        )
-        .await
-        .unwrap()
-        .into_value()
-        .unwrap();
-    assert!(loaded, "the result picture did not load");
+    let t0 = Instant::now();
+    loop {
+        let loaded: bool = page
+            .evaluate(
+                "(() => { const i = document.querySelector('#results img'); \
+                 return !!i && i.complete && i.naturalWidth > 0; })()",
+            )
+            .await
+            .unwrap()
+            .into_value()
+            .unwrap();
+        if loaded {
+            break;
+        }
+        assert!(t0.elapsed() < limit, "the result picture did not load");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
     // The last frame recorded is drawn once the page has asked for it.
     let last = console.latest_frame().unwrap().index as u64;
     let s = until(&page, limit, "the last frame", |s| {

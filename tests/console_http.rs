@@ -92,9 +92,9 @@ fn fetch_while(addr: SocketAddr, running: &std::sync::atomic::AtomicBool) -> Fet
 fn the_preview_is_the_recorded_frame_and_the_progress_the_counters() {
     let tmp = tempfile::tempdir().unwrap();
     let station = console_support::station();
-    // 6 τ × 3 phases × 2 directions = 36 patterns, 15 ms settle each: about
-    // 0.6 s of acquisition, long enough for several previews.
-    let patterns = console_support::patterns(6);
+    // 20 τ × 2 directions = 40 patterns, ≥ 15 ms settle each: ≥ 0.6 s of
+    // acquisition, several previews and status messages (every 100 ms).
+    let patterns = console_support::patterns(20);
     let total = patterns.len();
     let dir = tmp.path().join("acquisition");
     let mut m = console_support::measurement(
@@ -200,7 +200,7 @@ fn the_preview_is_the_recorded_frame_and_the_progress_the_counters() {
 fn stop_does_what_ctrl_c_does_and_the_run_resumes() {
     let tmp = tempfile::tempdir().unwrap();
     let station = console_support::station();
-    let patterns = console_support::patterns(40); // 240 patterns, ≥ 20 ms each
+    let patterns = console_support::patterns(60); // 120 patterns, ≥ 20 ms each
     let total = patterns.len();
     let dir = tmp.path().join("acquisition");
     let start = Start::New { overwrite: false };

@@ -23,7 +23,7 @@ pub fn station() -> Station {
     Station::load(&dir.join("station.toml")).unwrap()
 }
 
-/// `n` patterns: one direction pair, τ = 1, 2, … (three phases each).
+/// The default schedule's two directions at τ = 1, 2, …, `n_tau`: `2 n_tau` patterns.
 pub fn patterns(n_tau: usize) -> Vec<Pattern> {
     Schedule {
         tau_start: 1.0,
