@@ -29,7 +29,7 @@ enum Command {
     /// Reconstruct from an acquisition: screen points S1, S2 with uncertainty and quality maps.
     Reconstruct(cli::reconstruct::ReconstructArgs),
     /// Measure live: show the schedule, record frames as they come, reconstruct.
-    Measure(cli::measure::MeasureArgs),
+    Measure(Box<cli::measure::MeasureArgs>),
     /// Compare screen coordinates with a truth: found fraction, RMS error, calibration of σ.
     Compare(cli::compare::CompareArgs),
     /// Benchmarks: print figures as one JSON line.
