@@ -29,7 +29,7 @@ enum Command {
     /// Reconstruct from an acquisition: screen points S1, S2 with uncertainty and quality maps.
     Reconstruct(cli::reconstruct::ReconstructArgs),
     /// Measure live: show the schedule, record frames as they come, reconstruct.
-    Measure(cli::measure::MeasureArgs),
+    Measure(Box<cli::measure::MeasureArgs>),
     /// Compare screen coordinates with a truth: found fraction, RMS error, calibration of σ.
     Compare(cli::compare::CompareArgs),
     /// Benchmarks: print figures as one JSON line.
@@ -42,6 +42,8 @@ enum Command {
     Calibrate(cli::calibrate::CalibrateArgs),
     /// Error budget: every degree of freedom's effect on every Zernike term (paper Tables 1–4).
     Budget(cli::budget::BudgetArgs),
+    /// The operator's console over finished result folders (pictures, summary.json).
+    Serve(cli::serve::ServeArgs),
 }
 
 /// The library's diagnostics (`log`) on stderr: warnings and errors with
@@ -93,6 +95,7 @@ fn main() -> std::process::ExitCode {
         Command::Measure(args) => cli::measure::run(&args),
         Command::Calibrate(args) => cli::calibrate::run(&args),
         Command::Budget(args) => cli::budget::run(&args),
+        Command::Serve(args) => cli::serve::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

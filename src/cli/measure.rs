@@ -99,6 +99,14 @@ pub struct MeasureArgs {
     spectral: super::SpectralArgs,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
+    /// Serve the operator's console (live preview, progress, stop, results)
+    /// on PORT (127.0.0.1) or HOST:PORT; any but a loopback address needs
+    /// the token printed at start. It stays open after the run until Ctrl-C.
+    #[arg(long, value_name = "ADDR", value_parser = super::serve::parse_addr)]
+    serve: Option<std::net::SocketAddr>,
+    /// With --serve: close the console at most this long after the run, s.
+    #[arg(long, value_name = "SECONDS", requires = "serve")]
+    serve_keep_s: Option<f64>,
 }
 
 /// Faults the simulated camera injects (for testing the live loop).
@@ -236,16 +244,61 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .context("installing the Ctrl-C handler")?;
+    let served = match args.serve {
+        Some(addr) => Some(serve_measurement(
+            addr,
+            args,
+            &station,
+            &stop,
+            &mut measurement,
+        )?),
+        None => None,
+    };
     let t0 = Instant::now();
-    let report = run_session(&mut measurement, &stop)?;
+    let report = run_session(&mut measurement, &stop);
+    if let Some(s) = &served {
+        s.acquired(&report);
+    }
+    let report = report?;
     summarise(&report, &measurement);
-    finish(
+    let outcome = finish(
         args,
         &station,
         &report,
         &mut measurement,
         t0.elapsed().as_secs_f64(),
-    )
+        served.as_ref(),
+    );
+    if let Some(s) = served {
+        s.finished(&outcome);
+        s.linger(
+            args.serve_keep_s
+                .map(|k| Duration::from_secs_f64(k.max(0.0))),
+        );
+    }
+    outcome
+}
+
+/// `--serve`: the console, tapping the measurement.
+fn serve_measurement(
+    addr: std::net::SocketAddr,
+    args: &MeasureArgs,
+    station: &Station,
+    stop: &Arc<AtomicBool>,
+    measurement: &mut Measurement<'_>,
+) -> anyhow::Result<super::serve::Served> {
+    use mfd::console::{Mode, Spectral};
+    let screen = [station.screen.width, station.screen.height];
+    let served =
+        super::serve::Served::start(addr, Mode::Measure, stop, screen, &args.out.join("result"))?;
+    if !args.no_reconstruct {
+        served.console.set_spectral(Spectral::Streaming {
+            frames_in: measurement.recorded(),
+            frames_total: measurement.patterns().len(),
+        });
+    }
+    measurement.set_tap(Arc::new(served.console.clone()));
+    Ok(served)
 }
 
 /// The display `--display` names when it is not a monitor: `offscreen` is
@@ -385,6 +438,7 @@ fn finish(
     report: &Report,
     measurement: &mut Measurement<'_>,
     acquire_s: f64,
+    served: Option<&super::serve::Served>,
 ) -> anyhow::Result<()> {
     if report.interrupted {
         println!(
@@ -417,10 +471,20 @@ fn finish(
         max_expected_nm,
         ..Options::default()
     };
-    let mut rec =
-        pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut |_, _| {})?;
+    let mut fitting = |done: usize, total: usize| {
+        if let Some(s) = served {
+            s.fitting(done, total);
+        }
+    };
+    let mut rec = pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut fitting)?;
     if let Some(s) = rec.spectral.as_mut() {
         s.read_s = acquire_s;
+        if let Some(served) = served {
+            served.console.set_spectral(mfd::console::Spectral::Done {
+                both_found: s.maps.found_both(),
+                pixels: s.fitted_pixels,
+            });
+        }
     }
     super::output::write_and_print(&rec, &args.out.join("result"))
 }

@@ -9,6 +9,7 @@ pub mod display;
 pub mod measure;
 pub mod output;
 pub mod reconstruct;
+pub mod serve;
 pub mod simulate;
 pub mod station;
 pub mod surfaces_stage;

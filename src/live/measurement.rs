@@ -6,9 +6,13 @@
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 use super::SolverSink;
-use super::{acquire, Counters, FrameSink, LiveError, Recorder, Report, SequencerConfig, Session};
+use super::{
+    acquire_observed, Counters, FrameSink, LiveError, LiveTap, Recorder, Report, SequencerConfig,
+    Session,
+};
 use crate::acquire::acquisition::{Acquisition, AcquisitionError, FrameInfo};
 use crate::acquire::camera::{Camera, CameraConfig, CameraError, TriggerMode};
 use crate::acquire::display::PatternDisplay;
@@ -85,6 +89,7 @@ pub struct Measurement<'a> {
     recorder: Recorder,
     solver: Option<SpectralSolver>,
     config: SequencerConfig,
+    tap: Option<Arc<dyn LiveTap>>,
 }
 
 impl<'a> Measurement<'a> {
@@ -144,7 +149,14 @@ impl<'a> Measurement<'a> {
             recorder,
             solver,
             config,
+            tap: None,
         })
+    }
+
+    /// Lets `tap` observe the runs (the operator's console); it never
+    /// slows the sequencer (see [`LiveTap`]).
+    pub fn set_tap(&mut self, tap: Arc<dyn LiveTap>) {
+        self.tap = Some(tap);
     }
 
     /// The schedule.
@@ -200,7 +212,7 @@ impl<'a> Measurement<'a> {
         if let Some(s) = solver_sink.as_mut() {
             sinks.push(s);
         }
-        let result = acquire(session, &mut sinks, progress);
+        let result = acquire_observed(session, &mut sinks, progress, self.tap.as_deref());
         if let Err(e) = self.camera.stop() {
             log::warn!("stopping the camera: {e}");
         }

@@ -25,13 +25,15 @@ mod measurement;
 mod recorder;
 mod sequencer;
 mod sinks;
+mod tap;
 
 use std::time::Duration;
 
 pub use measurement::{Measurement, MeasurementError, Start};
 pub use recorder::Recorder;
-pub use sequencer::{acquire, Session};
+pub use sequencer::{acquire, acquire_observed, Session};
 pub use sinks::{FrameSink, SinkError, SolverSink};
+pub use tap::{LiveTap, SharedFrame};
 
 use crate::acquire::acquisition::AcquisitionError;
 use crate::acquire::camera::CameraError;

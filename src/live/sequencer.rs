@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{bounded, Receiver, SendTimeoutError, Sender, TrySendError};
 
 use super::sinks::FrameSink;
+use super::tap::{LiveTap, SharedFrame};
 use super::{Counters, LiveError, Report, SequencerConfig};
 use crate::acquire::camera::{Camera, CameraError, Frame, TriggerMode};
 use crate::acquire::display::{DisplayError, PatternDisplay, Shown};
@@ -42,12 +43,7 @@ pub struct Session<'a> {
     pub stop: &'a AtomicBool,
 }
 
-/// A frame with the schedule index it belongs to.
-#[derive(Debug)]
-struct Tagged {
-    index: usize,
-    frame: Frame,
-}
+type Tagged = SharedFrame;
 
 type Consumer = (&'static str, Sender<Arc<Tagged>>);
 
@@ -64,6 +60,21 @@ pub fn acquire(
     sinks: &mut [&mut dyn FrameSink],
     progress: &mut dyn FnMut(&Counters),
 ) -> Result<Report, LiveError> {
+    acquire_observed(session, sinks, progress, None)
+}
+
+/// [`acquire`] with a [`LiveTap`] that sees each pattern shown, each
+/// accepted frame (after every consumer has it) and the counters whenever
+/// `progress` does.
+///
+/// # Errors
+/// As [`acquire`].
+pub fn acquire_observed(
+    session: Session<'_>,
+    sinks: &mut [&mut dyn FrameSink],
+    progress: &mut dyn FnMut(&Counters),
+    tap: Option<&dyn LiveTap>,
+) -> Result<Report, LiveError> {
     let capacity = session.config.capacity.max(1);
     std::thread::scope(|scope| {
         let mut consumers: Vec<Consumer> = Vec::new();
@@ -75,8 +86,18 @@ pub fn acquire(
             handles.push((name, scope.spawn(move || drain(sink, rx))));
             consumers.push((name, tx));
         }
-        let mut shooter = Shooter::new(session);
-        let result = shooter.run(&consumers, progress);
+        let mut shooter = Shooter::new(session, tap);
+        let mut observed = |c: &Counters| {
+            progress(c);
+            if let Some(tap) = tap {
+                tap.counters(c);
+            }
+        };
+        let result = shooter.run(&consumers, &mut observed);
+        if let (Some(tap), Ok(report)) = (tap, &result) {
+            // The final counts (elapsed time after the last frame).
+            tap.counters(&report.counters);
+        }
         drop(consumers);
         let mut sink_error = None;
         for (sink, handle) in handles {
@@ -107,15 +128,16 @@ fn drain(sink: &mut dyn FrameSink, rx: Receiver<Arc<Tagged>>) -> Result<(), Live
         .map_err(|source| LiveError::SinkFinish { sink: name, source })
 }
 
-struct Shooter<'a> {
+struct Shooter<'a, 't> {
     s: Session<'a>,
+    tap: Option<&'t dyn LiveTap>,
     counters: Counters,
     last_sequence: Option<u64>,
     started: Instant,
 }
 
-impl<'a> Shooter<'a> {
-    fn new(s: Session<'a>) -> Self {
+impl<'a, 't> Shooter<'a, 't> {
+    fn new(s: Session<'a>, tap: Option<&'t dyn LiveTap>) -> Self {
         let counters = Counters {
             total: s.patterns.len(),
             first: s.first,
@@ -123,6 +145,7 @@ impl<'a> Shooter<'a> {
         };
         Shooter {
             s,
+            tap,
             counters,
             last_sequence: None,
             started: Instant::now(),
@@ -152,10 +175,18 @@ impl<'a> Shooter<'a> {
                 }
                 Err(e) => return Err(e),
             };
-            let tagged = Arc::new(Tagged { index, frame });
+            let pattern = self.s.patterns[index];
+            let tagged = Arc::new(Tagged {
+                index,
+                pattern,
+                frame,
+            });
             if !self.hand_over(&tagged, consumers, progress) {
                 // A consumer failed: its error is reported by `acquire`.
                 break;
+            }
+            if let Some(tap) = self.tap {
+                tap.accepted(&tagged);
             }
             self.counters.captured += 1;
             self.counters.elapsed_s = self.started.elapsed().as_secs_f64();
@@ -185,6 +216,9 @@ impl<'a> Shooter<'a> {
                         frame: index,
                         source,
                     })?;
+            if let Some(tap) = self.tap {
+                tap.showing(index, &pattern);
+            }
             // The exposure must start once the screen has settled.
             std::thread::sleep(shown.settled.saturating_duration_since(Instant::now()));
             match self.shoot(&shown) {

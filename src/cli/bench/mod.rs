@@ -1,6 +1,7 @@
 //! `mfd bench`: benchmarks that print machine-readable figures.
 
 mod budget;
+mod console;
 mod extremes;
 mod surfaces;
 mod thickness;
@@ -63,6 +64,11 @@ enum BenchKind {
     /// schedule), against the surfaces' Cramér–Rao bound and against what
     /// each reports: one JSON line per plate, or a markdown table.
     Thin(thin::ThinArgs),
+    /// A simulated measurement (recorder on disk) without the console and
+    /// with a console serving a slow client (previews read slowly, stalled
+    /// WebSockets); prints one JSON line: each run's frames/s, waits on
+    /// consumers, re-shoots and exposure margins, and what the client got.
+    Console(console::ConsoleBenchArgs),
 }
 
 #[derive(Args)]
@@ -114,6 +120,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         BenchKind::Extremes(a) => extremes::run(a),
         BenchKind::Budget(a) => budget::run(a),
         BenchKind::Thin(a) => thin::run(a),
+        BenchKind::Console(a) => console::run(a),
     }
 }
 
