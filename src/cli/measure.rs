@@ -419,5 +419,9 @@ fn finish(
     if let Some(s) = rec.spectral.as_mut() {
         s.read_s = acquire_s;
     }
-    super::output::write_and_print(&rec, &args.out.join("result"))
+    let result = args.out.join("result");
+    super::output::write_and_print(&rec, &result)?;
+    let report = mfd::report::page::write(&result, None, &Default::default())?;
+    println!("wrote the report {}", report.display());
+    Ok(())
 }
