@@ -30,6 +30,16 @@ with h5py.File(out, 'w') as f:
     d.attrs['No Data'] = no_data
 "#;
 
+/// Debian's python3 (where `scripts/install-deps.sh` installs h5py and
+/// numpy), before any other python3 on the PATH.
+fn python() -> &'static str {
+    if std::path::Path::new("/usr/bin/python3").is_file() {
+        "/usr/bin/python3"
+    } else {
+        "python3"
+    }
+}
+
 fn write_datx(dir: &std::path::Path, p: &Placement, nm: &[f64]) -> std::path::PathBuf {
     let raw = dir.join("map.f64");
     let bytes: Vec<u8> = nm.iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -37,7 +47,7 @@ fn write_datx(dir: &std::path::Path, p: &Placement, nm: &[f64]) -> std::path::Pa
     let script = dir.join("write_datx.py");
     std::fs::write(&script, WRITER).unwrap();
     let out = dir.join("flat.datx");
-    let status = std::process::Command::new("python3")
+    let status = std::process::Command::new(python())
         .arg(&script)
         .arg(&raw)
         .arg(&out)
@@ -93,7 +103,7 @@ fn datx_without_the_surface_group_names_it() {
     )
     .unwrap();
     let path = dir.path().join("empty.datx");
-    assert!(std::process::Command::new("python3")
+    assert!(std::process::Command::new(python())
         .arg(&script)
         .arg(&path)
         .status()

@@ -18,6 +18,23 @@ use mfd::formats::surfaces_file::SurfacesFile;
 const TOL_NM: f64 = 0.1;
 
 fn check(c: &compare::Comparison, added_j: usize, added_nm: f64) {
+    let worst = c
+        .terms
+        .iter()
+        .map(|t| {
+            let want = if t.noll == added_j { -added_nm } else { 0.0 };
+            (t.difference_nm - want).abs()
+        })
+        .fold(0.0, f64::max);
+    println!(
+        "{}: added {added_nm} nm of j = {added_j}; difference RMS {:.4} nm (pixels), {:.4} nm \
+         (coefficients); worst term error {worst:.2e} nm; rotation {:.6}°, flip {}",
+        c.interferometer_format,
+        c.difference_rms_nm,
+        c.difference_coefficients_rms_nm,
+        c.registration.rotation_deg,
+        c.registration.flip
+    );
     for t in &c.terms {
         let want = if t.noll == added_j { -added_nm } else { 0.0 };
         assert!(

@@ -82,7 +82,7 @@ impl Context {
                 ),
             ]);
         }
-        page.table(&["", ""], &rows);
+        page.pairs(&rows);
     }
 
     /// The "calibration" section: the station file, whether an uncertainty

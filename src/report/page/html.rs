@@ -94,6 +94,21 @@ impl Page {
         self.body.push_str(&t);
     }
 
+    /// A table of names and values, both left-aligned, without a header.
+    pub fn pairs(&mut self, rows: &[Vec<String>]) {
+        let mut t = String::from("<table>\n");
+        for row in rows {
+            t.push_str("<tr>");
+            for (i, cell) in row.iter().enumerate() {
+                let tag = if i == 0 { "th" } else { "td" };
+                t.push_str(&format!("<{tag} class=\"l\">{}</{tag}>", escape(cell)));
+            }
+            t.push_str("</tr>\n");
+        }
+        t.push_str("</table>\n");
+        self.body.push_str(&t);
+    }
+
     /// A picture inlined as a base64 PNG, with its caption.
     pub fn png(&mut self, png: &[u8], caption: &str) {
         let data = base64::engine::general_purpose::STANDARD.encode(png);
