@@ -86,6 +86,10 @@ fn datx_written_by_h5py_gives_back_the_added_term() {
             t.difference_nm
         );
     }
+    println!(
+        "datx: difference RMS {:.4} nm, j = 7 difference {:.4} nm",
+        c.difference_rms_nm, c.terms[6].difference_nm
+    );
     assert!(
         (c.difference_rms_nm - 5.0).abs() < 0.1,
         "{}",
