@@ -180,7 +180,8 @@ fn bad_dat_headers_name_the_file_and_the_field() {
     let dir = tempfile::tempdir().unwrap();
     let p = Placement::centred(0.0, false);
     let v = map(&p, 7, 0.0);
-    let cases: [(&str, fn(&mut DatHeader)); 4] = [
+    type Spoil = fn(&mut DatHeader);
+    let cases: [(&str, Spoil); 4] = [
         ("magic_number", |h| h.magic = 0x1234_5678),
         ("header_format", |h| h.format = 2),
         ("header_size", |h| h.size = 834),

@@ -10,6 +10,12 @@ use crate::formats::npy;
 use crate::report::plot::height_map_png;
 use crate::solve::spectral::PixelFlags;
 
+/// Pixels with data, and per flag (its meaning) the pixels that have it.
+pub type FlagCounts = (usize, Vec<(&'static str, usize)>);
+
+/// A map to draw: what it shows (", unit" at the end), rows, columns, values.
+type NamedMap = (String, usize, usize, Vec<f64>);
+
 /// One drawn map: its PNG and caption.
 pub struct Picture {
     /// The PNG file's bytes.
@@ -37,7 +43,7 @@ fn scalar_map(dir: &Path, name: &str) -> Result<Option<(usize, usize, Vec<f64>)>
 
 /// σ of each reflection's screen point (root sum of squares of σ_u, σ_v)
 /// from `screen_std.npy` (`[rows, columns, 2, 2]`).
-fn sigma_maps(dir: &Path) -> Result<Vec<(String, usize, usize, Vec<f64>)>, ReportError> {
+fn sigma_maps(dir: &Path) -> Result<Vec<NamedMap>, ReportError> {
     let path = dir.join("screen_std.npy");
     if !path.is_file() {
         return Ok(Vec::new());
@@ -107,7 +113,7 @@ pub fn maps(dir: &Path, scratch: &Path) -> Result<Vec<Picture>, ReportError> {
 ///
 /// # Errors
 /// [`ReportError::Npy`] when the file cannot be read.
-pub fn flag_counts(dir: &Path) -> Result<Option<(usize, Vec<(&'static str, usize)>)>, ReportError> {
+pub fn flag_counts(dir: &Path) -> Result<Option<FlagCounts>, ReportError> {
     let path = dir.join("flags.npy");
     if !path.is_file() {
         return Ok(None);

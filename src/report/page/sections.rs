@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use super::quality::Picture;
+use super::quality::{FlagCounts, Picture};
 use super::{Page, ReportError};
 use crate::compare::Comparison;
 use crate::report::summary::{StageDetail, Summary};
@@ -53,11 +53,7 @@ fn read(path: &Path) -> Result<Option<Vec<u8>>, ReportError> {
 
 /// The warnings: saturation, flagged pixels, outliers, a reduced χ² far
 /// from 1, a missing back, a geometry taken as exact.
-pub fn warnings(
-    page: &mut Page,
-    summary: Option<&Summary>,
-    flags: Option<&(usize, Vec<(&'static str, usize)>)>,
-) {
+pub fn warnings(page: &mut Page, summary: Option<&Summary>, flags: Option<&FlagCounts>) {
     page.heading("Warnings");
     let mut any = false;
     let mut warn = |page: &mut Page, text: String| {
@@ -249,11 +245,7 @@ pub fn fit(page: &mut Page, s: &Summary) {
 }
 
 /// The spectral stage: flag counts and quality maps.
-pub fn spectral(
-    page: &mut Page,
-    flags: Option<&(usize, Vec<(&'static str, usize)>)>,
-    maps: Vec<Picture>,
-) {
+pub fn spectral(page: &mut Page, flags: Option<&FlagCounts>, maps: Vec<Picture>) {
     page.heading("Spectral stage");
     match flags {
         Some((with_data, counts)) => {
