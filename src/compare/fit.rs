@@ -37,7 +37,8 @@ pub struct TermComparison {
     pub interferometer_nm: f64,
     /// mfd − interferometer, nm.
     pub difference_nm: f64,
-    /// The difference over mfd's σ.
+    /// The difference over mfd's σ (`None` for piston and tilt, which are
+    /// alignment).
     pub difference_over_sigma: Option<f64>,
 }
 
@@ -272,7 +273,9 @@ fn term_rows(ours: &[f64], std: Option<&[f64]>, theirs: &[f64]) -> Vec<TermCompa
                 mfd_std_nm: s,
                 interferometer_nm: theirs[k],
                 difference_nm: d,
-                difference_over_sigma: s.filter(|s| *s > 0.0).map(|s| d / s),
+                // Piston and tilt are the instruments' alignment, not the
+                // surface: their difference is shown, never weighed.
+                difference_over_sigma: s.filter(|s| *s > 0.0 && k >= REMOVED_TERMS).map(|s| d / s),
             }
         })
         .collect()

@@ -223,7 +223,9 @@ pub fn best_turn(
             t0 = golden(|t| cost(t, f), t0 - 1.0, t0 + 1.0);
             let c = cost(t0, f);
             if c < best.0 {
-                best = (c, t0.rem_euclid(360.0), f);
+                // In (−180°, 180°].
+                let t = t0.rem_euclid(360.0);
+                best = (c, if t > 180.0 { t - 360.0 } else { t }, f);
             }
             continue;
         };
