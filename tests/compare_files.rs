@@ -225,3 +225,56 @@ fn bad_dat_headers_name_the_file_and_the_field() {
         .to_string();
     assert!(e.contains("bad.csv") && e.contains("line 2"), "{e}");
 }
+
+#[test]
+fn differences_over_sigma_follow_mfds_sigma() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    // mfd's coefficients are the map's plus N(0, σ_k) (σ from
+    // `compare_support::std`), the map exact: difference/σ over j ≥ 4 must
+    // be standard normal. 20 draws × 18 terms = 360 values: their mean
+    // square has standard deviation √(2/360) = 0.075, their mean 1/√360 =
+    // 0.053; the bounds are 4 of those.
+    let dir = tempfile::tempdir().unwrap();
+    let p = Placement::centred(0.0, false);
+    let path = dir.path().join("map.npy");
+    mfd::formats::npy::write_f64(&path, &[p.height, p.width], &map(&p, 4, 0.0)).unwrap();
+    let m = compare::load(&path, &LoadOptions::default()).unwrap();
+    let opts = RegistrationOptions {
+        pixel_mm: Some(p.pixel_mm),
+        rotation_deg: Some(0.0),
+        flip: Some(false),
+        ..RegistrationOptions::default()
+    };
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(18);
+    let mut z = Vec::new();
+    for _ in 0..20 {
+        let noisy: Vec<f64> = coefficients()
+            .iter()
+            .zip(std())
+            .map(|(c, s)| {
+                c + s * <StandardNormal as Distribution<f64>>::sample(&StandardNormal, &mut rng)
+            })
+            .collect();
+        let surfaces = write_surfaces_with(dir.path(), &noisy);
+        let s = SurfacesFile::load(&surfaces).unwrap();
+        let c = compare::compare(&m, &s, &surfaces, "front", &opts).unwrap();
+        assert!(c.terms[..3]
+            .iter()
+            .all(|t| t.difference_over_sigma.is_none()));
+        z.extend(
+            c.terms[3..]
+                .iter()
+                .map(|t| t.difference_over_sigma.unwrap()),
+        );
+    }
+    let n = z.len() as f64;
+    let mean = z.iter().sum::<f64>() / n;
+    let ms = z.iter().map(|v| v * v).sum::<f64>() / n;
+    println!("difference/σ over {n} terms: mean {mean:.3}, mean square {ms:.3}");
+    assert!(mean.abs() < 4.0 / n.sqrt(), "mean {mean}");
+    assert!(
+        (ms - 1.0).abs() < 4.0 * (2.0 / n).sqrt(),
+        "mean square {ms}"
+    );
+}

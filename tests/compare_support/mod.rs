@@ -36,12 +36,17 @@ pub fn std() -> Vec<f64> {
 
 /// Writes `dir/surfaces.json` (mfd-surfaces/2) with [`coefficients`].
 pub fn write_surfaces(dir: &Path) -> PathBuf {
+    write_surfaces_with(dir, &coefficients())
+}
+
+/// Writes `dir/surfaces.json` with these front coefficients and [`std`].
+pub fn write_surfaces_with(dir: &Path, coefficients: &[f64]) -> PathBuf {
     let path = dir.join("surfaces.json");
     let json = serde_json::json!({
         "format": "mfd-surfaces/2",
         "zernike": {"ordering": "noll", "normalization": "rms",
                     "radius_mm": RADIUS_MM, "center_mm": CENTER_MM},
-        "front": {"coefficients_nm": coefficients(), "std_nm": std(),
+        "front": {"coefficients_nm": coefficients, "std_nm": std(),
                   "expected_error_rms_nm": 0.9, "not_reconstructed_because": null},
         "back": null
     });
