@@ -96,3 +96,57 @@ fn a_folder_without_a_result_is_an_error_naming_it() {
         "{err}"
     );
 }
+
+#[test]
+fn measure_writes_the_report_with_the_calibration_beside_its_station() {
+    let dir = tempfile::tempdir().unwrap();
+    // A station with a calibration report beside it, as `mfd calibrate
+    // solve` leaves one (`report.json`, calibrate::Report's fields).
+    let cal = dir.path().join("cal");
+    std::fs::create_dir_all(&cal).unwrap();
+    std::fs::copy(
+        common::public_small().join("station.toml"),
+        cal.join("station.toml"),
+    )
+    .unwrap();
+    let report = serde_json::json!({
+        "steps": [{"name": "joint", "trials": 4, "chi2": 80.0, "dof": 78, "chi2_per_dof": 1.0256,
+                   "selection": {}, "blocks": [{"name": "targets", "unit": "px", "count": 40,
+                   "rms": 0.051, "expected_rms": 0.05, "chi2": 41.6}]}],
+        "notes": ["the element's thickness as given"]
+    });
+    std::fs::write(cal.join("report.json"), report.to_string()).unwrap();
+    let out = dir.path().join("m");
+    let run = common::mfd(&[
+        "measure",
+        "--station",
+        cal.join("station.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--tau-start",
+        "2",
+        "--tau-stop",
+        "60",
+        "--tau-step",
+        "2",
+        "--noise",
+        "0.001",
+    ]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let page = out.join("result/report.html");
+    assert!(
+        stdout.contains(&format!("wrote the report {}", page.display())),
+        "{stdout}"
+    );
+    let html = std::fs::read_to_string(&page).unwrap();
+    check_self_contained(&html);
+    // The acquisition beside the result was found, and through it the
+    // station and its calibration.
+    assert!(html.contains("60 (60 complete)"), "2 × 30 patterns");
+    assert!(html.contains("1.0256") && html.contains("the element's thickness as given"));
+}

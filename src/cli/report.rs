@@ -19,6 +19,10 @@ pub struct ReportArgs {
     /// The acquisition folder; default RESULT_DIR/../acquisition when it exists.
     #[arg(long)]
     acquisition: Option<PathBuf>,
+    /// The calibration's folder (report.json, targets.png, flat_residuals.png);
+    /// default: the folder of the station file the acquisition names.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
     /// Compare with an interferometer map too (its options as `mfd compare`'s).
     #[command(flatten)]
     interferometer: super::compare_interferometer::InterferometerArgs,
@@ -30,6 +34,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let comparison = super::compare_interferometer::comparison(&args.interferometer, &surfaces)?;
     let options = ReportOptions {
         acquisition: args.acquisition.clone(),
+        calibration: args.calibration.clone(),
         comparison: comparison.as_ref(),
     };
     let path = page::write(&args.result, args.out.as_deref(), &options)?;

@@ -88,17 +88,20 @@ impl Context {
     /// The "calibration" section: the station file, whether an uncertainty
     /// sits beside it, and the calibration's steps and residuals from
     /// `report.json` with its pictures, when the station came from
-    /// `mfd calibrate solve`.
+    /// `mfd calibrate solve`;
     ///
     /// # Errors
     /// [`ReportError`] when a calibration file exists but cannot be read.
-    pub fn calibration(&self, page: &mut Page) -> Result<(), ReportError> {
+    /// `folder` (the calibration's output folder, e.g. where `mfd measure`'s
+    /// `--station` came from; `mfd measure` copies the station into the
+    /// acquisition) is searched instead of the station file's folder.
+    pub fn calibration(&self, page: &mut Page, folder: Option<&Path>) -> Result<(), ReportError> {
         page.heading("Calibration");
         let Some((path, _)) = &self.station else {
             page.paragraph("The station is not known (no acquisition found).");
             return Ok(());
         };
-        let dir = path.parent().unwrap_or(Path::new("."));
+        let dir = folder.unwrap_or_else(|| path.parent().unwrap_or(Path::new(".")));
         let unc = dir.join("station_uncertainty.toml");
         page.paragraph(&format!(
             "Station {}; {}",

@@ -87,6 +87,9 @@ pub struct ReportOptions<'a> {
     /// The acquisition folder (default: `RESULT/../acquisition` when it
     /// exists, as `mfd measure` lays it out).
     pub acquisition: Option<PathBuf>,
+    /// The calibration's folder (`report.json`, `targets.png`, …; default:
+    /// the folder of the station file the acquisition names).
+    pub calibration: Option<PathBuf>,
     /// A comparison with an interferometer to include.
     pub comparison: Option<&'a Comparison>,
 }
@@ -128,7 +131,7 @@ pub fn build(result: &Path, options: &ReportOptions) -> Result<String, ReportErr
         flags.as_ref(),
         quality::maps(result, &scratch.0)?,
     );
-    context.calibration(&mut page)?;
+    context.calibration(&mut page, options.calibration.as_deref())?;
     Ok(page.finish())
 }
 
