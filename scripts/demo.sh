@@ -51,3 +51,6 @@ echo "files: $out/acquisition (frames.npy, acquisition.toml, truth/), $out/trace
 echo "       $out/result (screen_coords.npy, screen_std.npy, screen_cov.npy, quality maps, surfaces.json,"
 echo "       front.png, back.png, *_coefficients.png, *_height_nm.npy, summary.json), $out/from-trace,"
 echo "       $out/result-statistics (the spectral maps from the statistics engine)"
+echo "== the measurement report: one HTML file to file (images inlined, opens without a network)"
+$mfd report "$out/result" --out "$out/report.html"
+echo "report: $(realpath "$out/report.html")"

@@ -12,8 +12,8 @@ packages+=(mesa-vulkan-drivers xvfb libxkbcommon-x11-0 libx11-xcb1 libxcursor1 l
   imagemagick x11-apps)
 # Live acquisition: libaravis 0.8 (feature aravis), libclang for v4l's bindgen (feature v4l).
 packages+=(libaravis-dev libusb-1.0-0-dev libclang-dev)
-# The console's browser test: headless Chromium (driven through the DevTools protocol).
-packages+=(chromium)
+# The report and the comparison: HDF5 for .datx (feature datx), h5py/numpy for its test writer, chromium for the browser test.
+packages+=(libhdf5-dev python3-h5py python3-numpy chromium)
 
 missing=()
 for p in "${packages[@]}"; do

@@ -21,5 +21,6 @@ cargo clippy --all-targets --locked --features display,aravis,v4l -- -D warnings
 echo "== cargo test"
 cargo test --all-targets --locked
 cargo test --doc --locked
+cargo test --locked --features datx --test compare_datx  # Zygo .datx through HDF5, files written by h5py
 echo "== cargo test, hardware features: the window under Xvfb, Aravis's fake GigE Vision camera on loopback"
 cargo test --locked --features display,aravis,v4l --lib --test display_xvfb --test display_offscreen --test aravis_fake

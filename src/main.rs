@@ -30,8 +30,10 @@ enum Command {
     Reconstruct(cli::reconstruct::ReconstructArgs),
     /// Measure live: show the schedule, record frames as they come, reconstruct.
     Measure(Box<cli::measure::MeasureArgs>),
-    /// Compare screen coordinates with a truth: found fraction, RMS error, calibration of σ.
+    /// Compare screen coordinates or surfaces with a truth, or surfaces with an interferometer map.
     Compare(cli::compare::CompareArgs),
+    /// The measurement report: one self-contained HTML file of a result folder.
+    Report(cli::report::ReportArgs),
     /// Benchmarks: print figures as one JSON line.
     Bench(cli::bench::BenchArgs),
     /// Speed against accuracy: surface error and compute time over schedules, terms, iterations.
@@ -90,6 +92,7 @@ fn main() -> std::process::ExitCode {
         Command::Bench(args) => cli::bench::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
         Command::Compare(args) => cli::compare::run(&args),
+        Command::Report(args) => cli::report::run(&args),
         Command::Tradeoff(args) => cli::tradeoff::run(&args),
         Command::Display(args) => cli::display::run(&args),
         Command::Measure(args) => cli::measure::run(&args),

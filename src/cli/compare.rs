@@ -20,10 +20,10 @@ pub struct CompareArgs {
     truth: Option<PathBuf>,
     /// Surfaces to judge (surfaces.json): RMS difference from
     /// --truth-surfaces over the aperture, piston and tilt removed.
-    #[arg(long, requires = "truth_surfaces")]
+    #[arg(long)]
     surfaces: Option<PathBuf>,
     /// The true surfaces (e.g. a simulation's truth/truth_surfaces.json).
-    #[arg(long)]
+    #[arg(long, requires = "surfaces")]
     truth_surfaces: Option<PathBuf>,
     /// The reconstruction's summary.json, to set the error against the
     /// surface uncertainty it reported.
@@ -33,6 +33,8 @@ pub struct CompareArgs {
     /// to check that the errors match them.
     #[arg(long)]
     std: Option<PathBuf>,
+    #[command(flatten)]
+    interferometer: super::compare_interferometer::InterferometerArgs,
 }
 
 /// Runs `mfd compare`.
@@ -42,6 +44,16 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     }
     if let (Some(a), Some(b)) = (&args.surfaces, &args.truth_surfaces) {
         compare_surfaces(a, b, args.summary.as_deref())?;
+    }
+    match (&args.surfaces, &args.interferometer.interferometer) {
+        (Some(s), Some(_)) => super::compare_interferometer::run(&args.interferometer, s)?,
+        (None, Some(_)) => {
+            bail!("--interferometer needs --surfaces (the surfaces.json to compare)")
+        }
+        (Some(_), None) if args.truth_surfaces.is_none() => {
+            bail!("--surfaces needs --truth-surfaces or --interferometer")
+        }
+        _ => {}
     }
     Ok(())
 }

@@ -486,5 +486,15 @@ fn finish(
             });
         }
     }
-    super::output::write_and_print(&rec, &args.out.join("result"))
+    let result = args.out.join("result");
+    super::output::write_and_print(&rec, &result)?;
+    // The acquisition holds a copy of the station: the calibration is
+    // where --station came from.
+    let options = mfd::report::page::ReportOptions {
+        calibration: args.station.parent().map(std::path::Path::to_path_buf),
+        ..Default::default()
+    };
+    let report = mfd::report::page::write(&result, None, &options)?;
+    println!("wrote the report {}", report.display());
+    Ok(())
 }

@@ -1,8 +1,10 @@
 //! What a reconstruction tells its reader: `summary.json` ([`summary`]),
 //! the pictures ([`pictures`], drawn with [`plot`]), and the figures of
-//! merit against a truth that every comparison quotes ([`metrics`]).
+//! merit against a truth that every comparison quotes ([`metrics`]), and
+//! the operator's report page ([`page`]).
 
 pub mod metrics;
+pub mod page;
 pub mod pictures;
 pub mod plot;
 pub mod summary;

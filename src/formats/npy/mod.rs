@@ -240,6 +240,19 @@ pub fn read_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>), NpyError> {
     Ok((shape, v))
 }
 
+/// Reads a little-endian uint16 array (e.g. `flags.npy`): `(shape, values)`.
+///
+/// # Errors
+/// [`NpyError`] naming the file, for I/O, header, dtype or length problems.
+pub fn read_u16(path: &Path) -> Result<(Vec<usize>, Vec<u16>), NpyError> {
+    let (shape, bytes) = read_all(path, "<u2", 2)?;
+    let v = bytes
+        .chunks_exact(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
+    Ok((shape, v))
+}
+
 /// Reads a boolean array: `(shape, values)`.
 ///
 /// # Errors
