@@ -42,6 +42,8 @@ enum Command {
     Calibrate(cli::calibrate::CalibrateArgs),
     /// Error budget: every degree of freedom's effect on every Zernike term (paper Tables 1–4).
     Budget(cli::budget::BudgetArgs),
+    /// Plan a measurement: a schedule's predicted accuracy and time, or a schedule designed for a budget.
+    Plan(cli::plan::PlanArgs),
 }
 
 /// The library's diagnostics (`log`) on stderr: warnings and errors with
@@ -93,6 +95,7 @@ fn main() -> std::process::ExitCode {
         Command::Measure(args) => cli::measure::run(&args),
         Command::Calibrate(args) => cli::calibrate::run(&args),
         Command::Budget(args) => cli::budget::run(&args),
+        Command::Plan(args) => cli::plan::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

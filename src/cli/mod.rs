@@ -8,6 +8,7 @@ pub mod compare;
 pub mod display;
 pub mod measure;
 pub mod output;
+pub mod plan;
 pub mod reconstruct;
 pub mod simulate;
 pub mod station;
