@@ -210,7 +210,7 @@ mod tests {
     use super::*;
 
     fn frames() -> Vec<FrameInfo> {
-        [(45.0, 0.5, 0.0), (-45.0, 97.3, 1.5707963267948966)]
+        [(45.0, 0.5, 0.0), (-45.0, 97.3, 1.234_567_890_123)]
             .iter()
             .enumerate()
             .map(|(index, &(d, t, p))| FrameInfo {
