@@ -35,8 +35,8 @@ pub struct PlanArgs {
     /// surfaces is at most this, nm.
     #[arg(long)]
     target_nm: Option<f64>,
-    /// Where the designed schedule is written (mfd-schedule/1).
-    #[arg(long, required_unless_present = "schedule")]
+    /// Where the designed schedule is written (mfd-schedule/1); needed with a budget.
+    #[arg(long)]
     out: Option<PathBuf>,
     /// Write the prediction as JSON (`frames`, `seconds`, `predicted.front_rms_nm`, ...).
     #[arg(long)]
