@@ -1,6 +1,7 @@
 //! `mfd plan` end to end on the 48 × 48 public-small station: a design
 //! written as mfd-schedule/1 with its JSON, its prediction read back from
-//! the file, and `mfd simulate --schedule` showing exactly that sequence.
+//! the file, and `mfd simulate --schedule` and `mfd measure --schedule`
+//! (simulated camera, offscreen display) showing exactly that sequence.
 
 mod common;
 
@@ -105,5 +106,40 @@ fn plan_designs_predicts_and_simulate_shows_the_schedule() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--tau-stop"));
+    // mfd measure shows it (simulated camera, offscreen display) and the
+    // recorder writes it, in that order.
+    let meas = dir.join("meas");
+    let out = mfd(&[
+        "measure",
+        "--station",
+        st,
+        "--camera",
+        "sim",
+        "--display",
+        "offscreen",
+        "--schedule",
+        sched.to_str().unwrap(),
+        "--out",
+        meas.to_str().unwrap(),
+        "--noise",
+        "0.05",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rec = mfd::acquire::acquisition::Acquisition::open(&meas.join("acquisition"))
+        .unwrap()
+        .frames()
+        .to_vec();
+    assert_eq!(rec.len(), want.len());
+    for (a, b) in rec.iter().zip(&want) {
+        assert_eq!(
+            (a.direction_deg, a.tau, a.phase_rad),
+            (b.direction_deg, b.tau, b.phase_rad)
+        );
+    }
+    assert!(meas.join("result/surfaces.json").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
