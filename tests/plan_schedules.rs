@@ -144,7 +144,7 @@ fn ar_coated_back_needs_no_separation() {
 /// Renders `frames` on the simulated bench station (5 % noise), runs the
 /// spectral stage and the surface solver; the RMS errors (j ≥ 4) of front
 /// and back against the truth.
-fn achieved(frames: &[FrameInfo], seed: u64) -> [f64; 2] {
+fn achieved(frames: &[FrameInfo], seed: u64, engine: mfd::solve::spectral::Engine) -> [f64; 2] {
     use mfd::acquire::patterns::Pattern;
     use mfd::optics::trace::{Plate, TracedView};
     use mfd::report::metrics::rms_difference_nm;
@@ -167,7 +167,11 @@ fn achieved(frames: &[FrameInfo], seed: u64) -> [f64; 2] {
         ..SimParams::default()
     };
     let mut cam = Renderer::new(&view, &station.screen, params).unwrap();
-    let mut solver = SpectralSolver::new(&station, frames, SpectralConfig::default()).unwrap();
+    let config = SpectralConfig {
+        engine,
+        ..SpectralConfig::default()
+    };
+    let mut solver = SpectralSolver::new(&station, frames, config).unwrap();
     let mut buf = vec![0u16; station.camera.pixel_count()];
     for (k, f) in frames.iter().enumerate() {
         let p = Pattern {
@@ -205,7 +209,7 @@ fn a_designed_schedule_reconstructs_near_its_prediction() {
     let mut sum = [0.0; 2];
     let seeds = [11, 12, 13];
     for &s in &seeds {
-        let a = achieved(&d.frames, s);
+        let a = achieved(&d.frames, s, mfd::solve::spectral::Engine::Series);
         eprintln!("seed {s}: achieved {a:?}, predicted {predicted:?}");
         for k in 0..2 {
             sum[k] += a[k] * a[k];
@@ -221,6 +225,30 @@ fn a_designed_schedule_reconstructs_near_its_prediction() {
         assert!(
             (0.8..1.5).contains(&r),
             "surface {k}: achieved {rms} vs predicted {}",
+            predicted[k]
+        );
+    }
+}
+
+#[test]
+fn the_statistics_engine_takes_a_designed_schedule() {
+    // Repeats and non-uniform τ in the statistics engine's tables.
+    let station = bench_station(10.0, 1.5, 15.0).unwrap();
+    let d = plan::design(&station, Budget::Frames(600), &DesignOptions::default()).unwrap();
+    let predicted = [
+        d.prediction.front.rms_nm,
+        d.prediction.back.as_ref().unwrap().rms_nm,
+    ];
+    let a = achieved(&d.frames, 21, mfd::solve::spectral::Engine::Statistics);
+    eprintln!("statistics engine: achieved {a:?}, predicted {predicted:?}");
+    for k in 0..2 {
+        // One seed: 33 squared Gaussians, relative spread 1/√66 = 12 %, so
+        // 0.64 at 3σ below; 1.5 the bound above.
+        let r = a[k] / predicted[k];
+        assert!(
+            (0.64..1.5).contains(&r),
+            "surface {k}: achieved {} vs predicted {}",
+            a[k],
             predicted[k]
         );
     }
