@@ -46,6 +46,8 @@ enum Command {
     Budget(cli::budget::BudgetArgs),
     /// The operator's console over finished result folders (pictures, summary.json).
     Serve(cli::serve::ServeArgs),
+    /// Plan a measurement: a schedule's predicted accuracy and time, or a schedule designed for a budget.
+    Plan(cli::plan::PlanArgs),
 }
 
 /// The library's diagnostics (`log`) on stderr: warnings and errors with
@@ -99,6 +101,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(args) => cli::calibrate::run(&args),
         Command::Budget(args) => cli::budget::run(&args),
         Command::Serve(args) => cli::serve::run(&args),
+        Command::Plan(args) => cli::plan::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -8,3 +8,4 @@ pub mod acquisition;
 pub mod camera;
 pub mod display;
 pub mod patterns;
+pub mod schedule_file;

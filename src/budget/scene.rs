@@ -5,15 +5,14 @@
 //! schedule with the simulator's radiometry, and the noise-free
 //! reconstruction whose covariance is the imaging-noise term.
 //!
-//! Also the `mfd-schedule/1` reader (`interchange.md`; no other part of the
-//! crate reads it yet) and the uncertainty from per-degree-of-freedom 1σ
+//! Also the `mfd-schedule/1` reader's budget form (the reader itself is
+//! `acquire::schedule_file`) and the uncertainty from per-degree-of-freedom 1σ
 //! values given on a command line.
 
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 use rayon::prelude::*;
-use serde::Deserialize;
 
 use crate::acquire::acquisition::FrameInfo;
 use crate::optics::station::{Dof, Station, StationUncertainty};
@@ -26,7 +25,7 @@ use crate::solve::surfaces::{
 };
 
 /// The format tag of a schedule file.
-pub const SCHEDULE_FORMAT: &str = "mfd-schedule/1";
+pub const SCHEDULE_FORMAT: &str = crate::acquire::schedule_file::SCHEDULE_FORMAT;
 
 /// What went wrong preparing a budget.
 #[derive(Debug, thiserror::Error)]
@@ -77,80 +76,27 @@ fn invalid(input: impl Into<String>, problem: impl Into<String>) -> BudgetError 
     }
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ScheduleFile {
-    format: String,
-    frame: Vec<ScheduleFrame>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ScheduleFrame {
-    direction_deg: f64,
-    tau: f64,
-    #[serde(default)]
-    phase_rad: f64,
-}
-
-/// Reads an `mfd-schedule/1` file: its frames in display order.
+/// Reads an `mfd-schedule/1` file: its frames in display order
+/// ([`crate::acquire::schedule_file`], the one reader).
 ///
 /// # Errors
 /// [`BudgetError`] naming the file and the field (`frame[k].tau`, ...).
 pub fn load_schedule(path: &Path) -> Result<Vec<FrameInfo>, BudgetError> {
-    let text = std::fs::read_to_string(path).map_err(|source| BudgetError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let file: ScheduleFile = toml::from_str(&text).map_err(|source| BudgetError::Parse {
-        path: path.to_path_buf(),
-        format: SCHEDULE_FORMAT,
-        source: Box::new(source),
-    })?;
-    let at = |field: String| format!("{}: {field}", path.display());
-    if file.format != SCHEDULE_FORMAT {
-        return Err(invalid(
-            at("format".into()),
-            format!("expected \"{SCHEDULE_FORMAT}\", found \"{}\"", file.format),
-        ));
+    use crate::acquire::schedule_file::{self, ScheduleFileError};
+    match schedule_file::load(path) {
+        Ok(file) => Ok(file.frames()),
+        Err(ScheduleFileError::Io { path, source }) => Err(BudgetError::Io { path, source }),
+        Err(ScheduleFileError::Parse { path, source }) => Err(BudgetError::Parse {
+            path,
+            format: SCHEDULE_FORMAT,
+            source,
+        }),
+        Err(ScheduleFileError::Invalid {
+            path,
+            field,
+            problem,
+        }) => Err(invalid(format!("{}: {field}", path.display()), problem)),
     }
-    if file.frame.is_empty() {
-        return Err(invalid(
-            at("frame".into()),
-            "no [[frame]] table: a schedule needs frames",
-        ));
-    }
-    let mut frames = Vec::with_capacity(file.frame.len());
-    for (index, f) in file.frame.iter().enumerate() {
-        for (name, v, ok) in [
-            (
-                "direction_deg",
-                f.direction_deg,
-                f.direction_deg.is_finite(),
-            ),
-            ("tau", f.tau, f.tau.is_finite() && f.tau > 0.0),
-            ("phase_rad", f.phase_rad, f.phase_rad.is_finite()),
-        ] {
-            if !ok {
-                let want = if name == "tau" {
-                    "a finite τ > 0"
-                } else {
-                    "a finite number"
-                };
-                return Err(invalid(
-                    at(format!("frame[{index}].{name}")),
-                    format!("expected {want}, found {v}"),
-                ));
-            }
-        }
-        frames.push(FrameInfo {
-            index,
-            direction_deg: f.direction_deg,
-            tau: f.tau,
-            phase_rad: f.phase_rad,
-        });
-    }
-    Ok(frames)
 }
 
 /// The spectral model's view of a schedule on `station`'s screen

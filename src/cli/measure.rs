@@ -49,6 +49,10 @@ pub struct MeasureArgs {
     out: PathBuf,
     #[command(flatten)]
     schedule: super::ScheduleArgs,
+    /// Show exactly the patterns of this schedule file (mfd-schedule/1, as
+    /// `mfd plan` writes), in its order, instead of the schedule flags.
+    #[arg(long = "schedule", value_name = "TOML", conflicts_with_all = ["directions", "tau_start", "tau_stop", "tau_step", "phases"])]
+    schedule_file: Option<PathBuf>,
     /// Simulated cameras: the element's true surfaces (mfd-surfaces/1 or /2); flat when omitted.
     #[arg(long)]
     sim_surfaces: Option<PathBuf>,
@@ -191,9 +195,14 @@ fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
 fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow::Result<()> {
     let mut display = display;
     let station = Station::load(&args.station)?;
-    let schedule = args.schedule.schedule();
-    schedule.validate()?;
-    let patterns = schedule.patterns();
+    let patterns = match &args.schedule_file {
+        Some(p) => mfd::acquire::schedule_file::load(p)?.patterns(),
+        None => {
+            let schedule = args.schedule.schedule();
+            schedule.validate()?;
+            schedule.patterns()
+        }
+    };
     let spec: CameraSpec = args.camera.parse()?;
     let screen = ScreenState::new();
     let sim = if spec.is_simulated() {

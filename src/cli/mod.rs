@@ -9,6 +9,7 @@ pub mod compare_interferometer;
 pub mod display;
 pub mod measure;
 pub mod output;
+pub mod plan;
 pub mod reconstruct;
 pub mod report;
 pub mod serve;

@@ -32,6 +32,10 @@ pub struct SimulateArgs {
     out: PathBuf,
     #[command(flatten)]
     schedule: super::ScheduleArgs,
+    /// Show exactly the patterns of this schedule file (mfd-schedule/1, as
+    /// `mfd plan` writes), in its order, instead of the schedule flags.
+    #[arg(long = "schedule", value_name = "TOML", conflicts_with_all = ["directions", "tau_start", "tau_stop", "tau_step", "phases"])]
+    schedule_file: Option<PathBuf>,
     /// Read noise, standard deviation as a fraction of full scale (0 = exact).
     #[arg(long, default_value_t = 0.0)]
     noise: f64,
@@ -79,8 +83,6 @@ pub struct SimulateArgs {
 /// Runs `mfd simulate`.
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let station = Station::load(&args.station)?;
-    let schedule = args.schedule.schedule();
-    schedule.validate()?;
     let (front, back) = match args.random_surfaces {
         Some(seed) => random_pair(&station, seed)?,
         None => super::load_surfaces(args.surfaces.as_deref(), &station)?,
@@ -108,7 +110,14 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             dtype: mfd::formats::npy::StackDtype::U16,
         },
     };
-    let patterns = schedule.patterns();
+    let patterns = match &args.schedule_file {
+        Some(p) => mfd::acquire::schedule_file::load(p)?.patterns(),
+        None => {
+            let schedule = args.schedule.schedule();
+            schedule.validate()?;
+            schedule.patterns()
+        }
+    };
     let sim = Simulation {
         station: &station,
         plate: &plate,

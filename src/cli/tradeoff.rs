@@ -2,6 +2,8 @@
 //! over a grid of schedules (frames per direction), Zernike term counts and
 //! iteration limits; surface errors against the truth, the solver's own
 //! uncertainty, and compute time; a CSV, a markdown table and a plot.
+//! With `--designed`, also the schedules `mfd plan` designs for the same
+//! frame budgets (predicted bound, achieved error, acquisition time).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -48,6 +50,11 @@ pub struct TradeoffArgs {
     /// Output folder: tradeoff.csv, tradeoff.md, tradeoff.png.
     #[arg(long)]
     out: PathBuf,
+    /// Also a schedule designed by `mfd plan` for each frame budget (the
+    /// same frames in total), at the largest term count and iteration
+    /// limit; its note gives the predicted bound and the acquisition time.
+    #[arg(long)]
+    designed: bool,
 }
 
 /// One grid point's outcome.
@@ -101,7 +108,101 @@ pub fn run(args: &TradeoffArgs) -> anyhow::Result<()> {
             }
         }
     }
+    if args.designed {
+        designed_rows(&station, &view, (&front, &back), args, &mut rows)?;
+    }
     write_outputs(&rows, args)
+}
+
+/// One row per frame budget for the schedule `mfd plan` designs.
+fn designed_rows(
+    station: &Station,
+    view: &TracedView,
+    truth: (&ZernikeSurface, &ZernikeSurface),
+    args: &TradeoffArgs,
+    rows: &mut Vec<Row>,
+) -> anyhow::Result<()> {
+    let terms = args.terms.iter().copied().max().unwrap_or(36);
+    let it = args.max_iter.iter().copied().max().unwrap_or(30);
+    let mut opts = mfd::plan::DesignOptions::default();
+    opts.plan.radiometry.noise_frac = args.noise;
+    for &n in &args.frames {
+        let t = Instant::now();
+        let d = mfd::plan::design(station, mfd::plan::Budget::Frames(2 * n), &opts)?;
+        let design_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let maps = solve_frames(
+            station,
+            view,
+            &d.frames,
+            it,
+            args.noise,
+            args.seed + n as u64,
+        )?;
+        let mut row = surfaces(
+            station,
+            &maps,
+            truth,
+            (n, terms, it),
+            t.elapsed().as_secs_f64(),
+        );
+        let p = &d.prediction;
+        row.note = format!(
+            "designed (plan {design_s:.1} s): predicted {:.2} / {} nm, acquisition {:.1} s{}",
+            p.front.rms_nm,
+            p.back
+                .as_ref()
+                .map_or("—".into(), |b| format!("{:.2}", b.rms_nm)),
+            p.seconds,
+            if row.note.is_empty() {
+                String::new()
+            } else {
+                format!("; {}", row.note)
+            }
+        );
+        eprintln!(
+            "designed {} frames: front {:.2} nm, back {:.2} nm; {}",
+            2 * n,
+            row.error_nm[0],
+            row.error_nm[1],
+            row.note
+        );
+        rows.push(row);
+    }
+    Ok(())
+}
+
+/// Renders `frames` on the fly and runs the spectral solver.
+fn solve_frames(
+    station: &Station,
+    view: &TracedView,
+    frames: &[FrameInfo],
+    it: usize,
+    noise: f64,
+    seed: u64,
+) -> anyhow::Result<SpectralMaps> {
+    let params = SimParams {
+        noise_frac: noise,
+        seed,
+        ..SimParams::default()
+    };
+    let mut cam = Renderer::new(view, &station.screen, params)?;
+    let config = SpectralConfig {
+        max_iter: it.max(1),
+        ..SpectralConfig::default()
+    };
+    let mut solver = SpectralSolver::new(station, frames, config)?;
+    let mut buf = vec![0u16; station.camera.pixel_count()];
+    for (k, f) in frames.iter().enumerate() {
+        let p = mfd::acquire::patterns::Pattern {
+            direction_deg: f.direction_deg,
+            tau: f.tau,
+            phase_rad: f.phase_rad,
+        };
+        cam.render(&p, k as u64, &mut buf);
+        solver.push_frame(k, &buf)?;
+    }
+    Ok(solver.solve()?)
 }
 
 /// Renders the schedule on the fly (no disk) and runs the spectral solver.
@@ -263,7 +364,7 @@ fn plot(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
     for &terms in &args.terms {
         let pick = |f: &dyn Fn(&Row) -> f64| -> Vec<(f64, f64)> {
             rows.iter()
-                .filter(|r| r.terms == terms && r.max_iter == it)
+                .filter(|r| r.terms == terms && r.max_iter == it && !r.note.starts_with("designed"))
                 .map(|r| ((2 * r.frames) as f64, f(r)))
                 .collect()
         };

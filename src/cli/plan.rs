@@ -1,0 +1,266 @@
+//! `mfd plan`: a schedule's predicted accuracy, separability, ambiguity and
+//! acquisition time before any frame is taken; or, with a budget (`--frames`,
+//! `--time-s`, `--target-nm`), the schedule designed for it.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+
+use mfd::acquire::acquisition::FrameInfo;
+use mfd::acquire::schedule_file;
+use mfd::budget::scene::Radiometry;
+use mfd::optics::station::{DisplayProfile, Station};
+use mfd::plan::{self, Budget, DesignOptions, PlanOptions, Prediction, Timing};
+
+/// Arguments of `mfd plan`.
+#[derive(Args)]
+pub struct PlanArgs {
+    /// Station geometry (mfd-station/1 or /2).
+    #[arg(long)]
+    station: PathBuf,
+    /// The schedule to predict (mfd-schedule/1); without it and without a
+    /// budget, the schedule flags below.
+    #[arg(long, conflicts_with_all = ["frames", "time_s", "target_nm"])]
+    schedule: Option<PathBuf>,
+    #[command(flatten)]
+    flags: super::ScheduleArgs,
+    /// Design a schedule of this many frames.
+    #[arg(long, conflicts_with_all = ["time_s", "target_nm"])]
+    frames: Option<usize>,
+    /// Design a schedule that takes at most this many seconds.
+    #[arg(long, conflicts_with = "target_nm")]
+    time_s: Option<f64>,
+    /// Design the shortest schedule whose predicted RMS error of both
+    /// surfaces is at most this, nm.
+    #[arg(long)]
+    target_nm: Option<f64>,
+    /// Where the designed schedule is written (mfd-schedule/1); needed with a budget.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Write the prediction as JSON (`frames`, `seconds`, `predicted.front_rms_nm`, ...).
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Read noise, fraction of full scale, as `mfd simulate --noise`.
+    #[arg(long, default_value_t = 0.05)]
+    noise: f64,
+    /// Modulation falloff τ_max, as `mfd simulate --tau-max`.
+    #[arg(long, default_value_t = 150.0)]
+    tau_max: f64,
+    /// The camera's bits per sample.
+    #[arg(long, default_value_t = 16)]
+    bit_depth: u32,
+    /// Ambient light, as `mfd simulate --ambient`.
+    #[arg(long, default_value_t = 0.01)]
+    ambient: f64,
+    /// Zernike terms per surface.
+    #[arg(long, default_value_t = 36)]
+    terms: usize,
+    /// The element's thickness, mm (default: the station's).
+    #[arg(long)]
+    thickness_mm: Option<f64>,
+    /// The element's refractive index (default: the station's).
+    #[arg(long)]
+    index: Option<f64>,
+    /// Expected departure of either surface from flat, nm RMS (sets the prior's spread).
+    #[arg(long, default_value_t = 200.0)]
+    surface_nm: f64,
+    /// The station's share of the prior's spread (calibration, placement), screen px.
+    #[arg(long, default_value_t = 3.0)]
+    station_spread_px: f64,
+    /// Factor on the back reflection's weight: 0 for an AR-coated back.
+    #[arg(long, default_value_t = 1.0)]
+    back_scale: f64,
+    /// Display profile (hw/display/*.toml) whose settle time is used
+    /// (default: 30 ms, the paper's LCD).
+    #[arg(long)]
+    display_profile: Option<PathBuf>,
+    /// The display's refresh rate, Hz.
+    #[arg(long, default_value_t = 60.0)]
+    display_rate_hz: f64,
+    /// The camera's exposure, ms.
+    #[arg(long, default_value_t = 10.0)]
+    exposure_ms: f64,
+    /// The camera's largest frame rate, Hz.
+    #[arg(long, default_value_t = 30.0)]
+    camera_rate_hz: f64,
+    /// Largest candidate τ of a design (default 2 τ_max).
+    #[arg(long)]
+    tau_hi: Option<f64>,
+}
+
+/// Runs `mfd plan`.
+pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
+    let mut station = Station::load(&args.station)?;
+    if let Some(t) = args.thickness_mm {
+        anyhow::ensure!(
+            t.is_finite() && t > 0.0,
+            "--thickness-mm {t}: expected a thickness > 0 mm"
+        );
+        station.element.thickness_mm = t;
+    }
+    if let Some(n) = args.index {
+        anyhow::ensure!(
+            n.is_finite() && n > 1.0,
+            "--index {n}: expected a refractive index > 1"
+        );
+        station.element.refractive_index = n;
+    }
+    let opts = plan_options(args)?;
+    let start = std::time::Instant::now();
+    let budget = match (args.frames, args.time_s, args.target_nm) {
+        (Some(n), _, _) => Some(Budget::Frames(n)),
+        (_, Some(t), _) => Some(Budget::Seconds(t)),
+        (_, _, Some(x)) => Some(Budget::TargetNm(x)),
+        _ => None,
+    };
+    let (prediction, extra) = match budget {
+        Some(b) => {
+            let dopts = DesignOptions {
+                plan: opts,
+                directions_deg: args.flags.directions.clone(),
+                tau_hi: args.tau_hi,
+                ..DesignOptions::default()
+            };
+            let d = plan::design(&station, b, &dopts)?;
+            let out = args
+                .out
+                .as_ref()
+                .context("--out is needed to write the designed schedule")?;
+            let comment = format!(
+                "Designed by `mfd plan` for {b:?} on {}: {} frames, {:.1} s, predicted RMS front {:.2} nm, back {}.",
+                args.station.display(),
+                d.frames.len(),
+                d.prediction.seconds,
+                d.prediction.front.rms_nm,
+                d.prediction.back.as_ref().map_or("not measured".into(), |b| format!("{:.2} nm", b.rms_nm)),
+            );
+            schedule_file::write(out, &d.frames, &comment)?;
+            println!("wrote {} ({} frames)", out.display(), d.frames.len());
+            let extra = serde_json::json!({
+                "design": {
+                    "uniform_share": d.uniform_share,
+                    "efficiency": d.efficiency,
+                    "criterion_px2": d.criterion_px2,
+                    "distinct_taus": distinct_taus(&d.frames),
+                }
+            });
+            (d.prediction, Some(extra))
+        }
+        None => {
+            let frames = match &args.schedule {
+                Some(p) => schedule_file::load(p)?.frames(),
+                None => {
+                    let s = args.flags.schedule();
+                    s.validate()?;
+                    FrameInfo::from_patterns(&s.patterns())
+                }
+            };
+            (plan::predict(&station, &frames, &opts)?, None)
+        }
+    };
+    print_summary(&prediction);
+    if let Some(e) = &extra {
+        println!("design: {}", e["design"]);
+    }
+    println!("planned in {:.1} s", start.elapsed().as_secs_f64());
+    if let Some(p) = &args.json {
+        let mut j = prediction.json();
+        if let (Some(obj), Some(serde_json::Value::Object(e))) = (j.as_object_mut(), extra) {
+            obj.extend(e);
+        }
+        std::fs::write(p, serde_json::to_string_pretty(&j)? + "\n")
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}
+
+fn plan_options(args: &PlanArgs) -> anyhow::Result<PlanOptions> {
+    let timing = match &args.display_profile {
+        Some(p) => Timing::with_profile(&DisplayProfile::load(p)?),
+        None => Timing::default(),
+    };
+    let opts = PlanOptions {
+        radiometry: Radiometry {
+            noise_frac: args.noise,
+            bit_depth: args.bit_depth,
+            ambient: args.ambient,
+            tau_max: args.tau_max,
+        },
+        terms: args.terms,
+        back_scale: args.back_scale,
+        surface_nm: args.surface_nm,
+        station_spread_px: args.station_spread_px,
+        timing: Timing {
+            display_rate_hz: args.display_rate_hz,
+            exposure_ms: args.exposure_ms,
+            camera_rate_hz: args.camera_rate_hz,
+            ..timing
+        },
+        bound_stride_px: None,
+    };
+    anyhow::ensure!(
+        [8, 12, 16].contains(&args.bit_depth),
+        "--bit-depth {}: expected 8, 12 or 16",
+        args.bit_depth
+    );
+    opts.validate()?;
+    Ok(opts)
+}
+
+fn distinct_taus(frames: &[FrameInfo]) -> usize {
+    let mut t: Vec<(u64, u64)> = frames
+        .iter()
+        .map(|f| (f.direction_deg.to_bits(), f.tau.to_bits()))
+        .collect();
+    t.sort_unstable();
+    t.dedup();
+    t.len()
+}
+
+fn print_summary(p: &Prediction) {
+    println!(
+        "{} frames ({} patterns shown), {:.1} s of acquisition",
+        p.frames, p.patterns_shown, p.seconds
+    );
+    println!(
+        "predicted RMS error (Cramér–Rao, per-pixel bound): front {:.3} nm",
+        p.front.rms_nm
+    );
+    match (&p.back, &p.back_not_measured_because) {
+        (Some(b), _) => println!(
+            "                                           back  {:.3} nm",
+            b.rms_nm
+        ),
+        (None, Some(why)) => println!("back not measured: {why}"),
+        (None, None) => println!("back not measured"),
+    }
+    let s = &p.separation;
+    println!(
+        "separable on {:.0} % of {} two-reflection pixels (median separation {:.1} px): {}",
+        100.0 * s.separable_fraction,
+        s.pixels,
+        s.median_separation_px,
+        if s.separable { "yes" } else { "no" }
+    );
+    let a = &p.ambiguity;
+    for d in &a.directions {
+        println!(
+            "direction {:+.0}°: main lobe ±{:.1} px, unambiguous range {}",
+            d.direction_deg,
+            d.main_lobe_px,
+            d.unambiguous_range_px
+                .map_or("the whole screen".into(), |r| format!("{r:.1} px"))
+        );
+    }
+    println!(
+        "prior spread {:.1} px: start {} (spectral start found on {:.0} % of sample pixels)",
+        a.prior_spread_px,
+        if a.unambiguous {
+            "unambiguous"
+        } else {
+            "AMBIGUOUS"
+        },
+        100.0 * a.start_found_fraction
+    );
+}

@@ -1,0 +1,253 @@
+//! Whether a schedule's fit can start unambiguously: per fringe direction,
+//! the schedule's ambiguity function (its spectral window over the
+//! fringe coordinate), the unambiguous range it gives against the prior's
+//! spread (how far the true screen points may lie from the station's
+//! flat-plate prediction), and the spectral stage's own start (its
+//! periodogram peak) on noise-free series of sample pixels.
+
+use serde::Serialize;
+
+use crate::acquire::acquisition::FrameInfo;
+use crate::acquire::patterns::FringeAxis;
+use crate::optics::station::Station;
+use crate::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
+use crate::optics::zernike::{ZernikeBasis, ZernikeSurface};
+use crate::solve::spectral::model::Design;
+use crate::solve::spectral::periodogram::SpectrumPlans;
+
+use super::{PlanError, PlanOptions};
+
+/// Height of a false maximum of the ambiguity function, relative to the
+/// true one, at which a start may pick it: half (with the noise a bound
+/// allows on a measured pixel, a secondary peak at half the power of the
+/// main one is not confused with it, one at nearly full power can be).
+pub const SIDELOBE_MAX: f64 = 0.5;
+
+/// One direction's ambiguity.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DirectionAmbiguity {
+    /// The direction, degrees.
+    pub direction_deg: f64,
+    /// Half width of the main lobe (to half height), screen px.
+    pub main_lobe_px: f64,
+    /// Distance to the nearest false maximum of at least [`SIDELOBE_MAX`],
+    /// screen px; `None` when there is none on the screen.
+    pub unambiguous_range_px: Option<f64>,
+}
+
+/// The ambiguity of a schedule.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Ambiguity {
+    /// Per direction.
+    pub directions: Vec<DirectionAmbiguity>,
+    /// How far the true points may lie from the prediction, screen px.
+    pub prior_spread_px: f64,
+    /// Every direction's unambiguous range exceeds twice the spread.
+    pub unambiguous: bool,
+    /// Fraction of sample pixels whose spectral-stage start (the
+    /// periodogram's peak, noise-free) lies at their true points.
+    pub start_found_fraction: f64,
+}
+
+/// `Σ_f e_f² cos(2π τ_f Δ) / Σ_f e_f²` over one direction's frames,
+/// `e_f = exp(−κ τ_f²)` the modulation of frame f: the correlation of the
+/// noise-free fringe signal of a screen point with that of a point `Δ`
+/// (fringe coordinate) away, each frame weighted by its information. Its
+/// false maxima are where a fit's start can lock onto the wrong fringe.
+pub fn ambiguity_at(taus: &[f64], kappa: f64, delta: f64) -> f64 {
+    let (mut re, mut sum) = (0.0, 0.0);
+    for &t in taus {
+        let e2 = (-2.0 * kappa * t * t).exp();
+        re += e2 * (std::f64::consts::TAU * t * delta).cos();
+        sum += e2;
+    }
+    if sum > 0.0 {
+        re / sum
+    } else {
+        0.0
+    }
+}
+
+/// The main lobe and unambiguous range of one direction, scanned over the
+/// whole screen (Δ up to 1.05 in fringe coordinate) at 1/32 of the
+/// finest fringe period.
+pub fn direction_ambiguity(taus: &[f64], kappa: f64, axis: &FringeAxis) -> (f64, Option<f64>) {
+    let tau_hi = taus.iter().copied().fold(1.0, f64::max);
+    let step = 1.0 / (32.0 * tau_hi);
+    let n = (1.05 / step).ceil() as usize;
+    let mut lobe = None;
+    let mut range = None;
+    for k in 1..=n {
+        let d = k as f64 * step;
+        let a = ambiguity_at(taus, kappa, d);
+        match lobe {
+            None if a < SIDELOBE_MAX => lobe = Some(d),
+            Some(_) if a >= SIDELOBE_MAX => {
+                range = Some(d);
+                break;
+            }
+            _ => {}
+        }
+    }
+    let px = |d: f64| d * axis.length_px;
+    (px(lobe.unwrap_or(1.05)), range.map(px))
+}
+
+/// How far the true screen points may lie from the flat-plate prediction:
+/// the station's share plus the largest shift a defocus of
+/// `surface_nm` RMS on both faces makes (traced).
+pub fn prior_spread_px(
+    station: &Station,
+    flat: &TracedView,
+    opts: &PlanOptions,
+) -> Result<f64, PlanError> {
+    let e = &station.element;
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    let mut c = vec![0.0; 4];
+    c[3] = opts.surface_nm;
+    let bent = ZernikeBasis::new(4, e.aperture_radius_mm, centre)
+        .and_then(|b| ZernikeSurface::new(b, c))
+        .map_err(crate::budget::scene::BudgetError::from)?;
+    let view = TracedView::trace(
+        station,
+        &Plate::new(station, bent.clone(), bent, DEFAULT_EDGE_MARGIN_MM),
+    );
+    let mut worst: f64 = 0.0;
+    for (a, b) in flat.pixels.iter().zip(&view.pixels) {
+        for (p, q) in [(a.front, b.front), (a.back, b.back)] {
+            if let (Ok(p), Ok(q)) = (p, q) {
+                worst = worst.max((p.u - q.u).hypot(p.v - q.v));
+            }
+        }
+    }
+    Ok(opts.station_spread_px + worst)
+}
+
+/// The fraction of `pixels` (of `view`) whose noise-free series under
+/// `design` puts the periodogram's peak (the spectral stage's start) within
+/// one Fourier bin of the span of its true points, in every direction.
+pub fn start_found_fraction(
+    design: &Design,
+    view: &TracedView,
+    pixels: &[usize],
+    kappa: f64,
+) -> f64 {
+    let plans = SpectrumPlans::new(design);
+    let mut found = 0usize;
+    let mut y = vec![0.0; design.frames.len()];
+    for &q in pixels {
+        let px = &view.pixels[q];
+        let hits: Vec<_> = [px.front, px.back]
+            .into_iter()
+            .filter_map(|h| h.ok().filter(|h| h.weight > 0.0))
+            .collect();
+        for (f, yf) in design.frames.iter().zip(y.iter_mut()) {
+            let ax = design.axes[f.dir];
+            let e = (-kappa * f.tau * f.tau).exp();
+            *yf = 1.0
+                + hits
+                    .iter()
+                    .map(|h| {
+                        h.weight
+                            * e
+                            * (std::f64::consts::TAU * (f.tau * ax.s(h.u, h.v) + f.phase_cycles))
+                                .cos()
+                    })
+                    .sum::<f64>();
+        }
+        let ok = (0..design.axes.len()).all(|d| {
+            let ax = design.axes[d];
+            let mus: Vec<f64> = hits.iter().map(|h| ax.s(h.u, h.v)).collect();
+            let (lo, hi) = mus
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &m| {
+                    (a.min(m), b.max(m))
+                });
+            let bin = plans.bin(d);
+            plans
+                .peak(d, &y)
+                .is_some_and(|(mu, _)| mu >= lo - bin && mu <= hi + bin)
+        });
+        found += usize::from(ok);
+    }
+    if pixels.is_empty() {
+        0.0
+    } else {
+        found as f64 / pixels.len() as f64
+    }
+}
+
+/// The ambiguity of `frames` on `station`.
+pub fn ambiguity(
+    station: &Station,
+    frames: &[FrameInfo],
+    design: &Design,
+    sample: (&TracedView, &[usize]),
+    prior_spread_px: f64,
+    kappa: f64,
+) -> Ambiguity {
+    let directions: Vec<DirectionAmbiguity> = design
+        .directions_deg
+        .iter()
+        .map(|&d| {
+            let taus: Vec<f64> = frames
+                .iter()
+                .filter(|f| f.direction_deg == d)
+                .map(|f| f.tau)
+                .collect();
+            let axis = FringeAxis::new(d, station.screen.width, station.screen.height);
+            let (lobe, range) = direction_ambiguity(&taus, kappa, &axis);
+            DirectionAmbiguity {
+                direction_deg: d,
+                main_lobe_px: lobe,
+                unambiguous_range_px: range,
+            }
+        })
+        .collect();
+    let unambiguous = directions.iter().all(|d| {
+        d.unambiguous_range_px
+            .is_none_or(|r| r > 2.0 * prior_spread_px)
+    });
+    Ambiguity {
+        directions,
+        prior_spread_px,
+        unambiguous,
+        start_found_fraction: start_found_fraction(design, sample.0, sample.1, kappa),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_schedule_has_no_alias_on_the_screen() {
+        // τ = 0.5 … 50 step 0.5 without falloff: ≈ sin(2π T Δ)/(2π T Δ),
+        // T = 50 (the sum is the integral over [0, T] to O(1/N)), which
+        // halves at 2π T Δ = 1.8955; periodic with period 1/0.5 = 2, so no
+        // false maximum at Δ ≤ 1.05.
+        let taus: Vec<f64> = (1..=100).map(|k| 0.5 * k as f64).collect();
+        let axis = FringeAxis::new(45.0, 1600, 1200);
+        let (lobe, range) = direction_ambiguity(&taus, 0.0, &axis);
+        assert!(range.is_none(), "{range:?}");
+        let want = 1.8955 / (std::f64::consts::TAU * 50.0) * axis.length_px;
+        // The scan's step is 1/(32·50) in Δ (1.2 px here); the discrete
+        // sum's endpoint terms shift the crossing by ~1 % of the lobe.
+        let tol = axis.length_px / 1600.0 + 0.02 * want;
+        assert!((lobe - want).abs() < tol, "{lobe} vs {want}");
+    }
+
+    #[test]
+    fn one_tau_aliases_at_its_period() {
+        // cos(2π τ Δ) with τ = 100: back at 0.5 at Δ = 1/100 − 1/600.
+        let axis = FringeAxis::new(45.0, 1600, 1200);
+        let (lobe, range) = direction_ambiguity(&[100.0, 100.0], 0.0, &axis);
+        let step = axis.length_px / 3200.0;
+        assert!((lobe - axis.length_px / 600.0).abs() <= step, "{lobe}");
+        let r = range.expect("aliases");
+        assert!(
+            (r - (0.01 - 1.0 / 600.0) * axis.length_px).abs() <= step,
+            "{r}"
+        );
+    }
+}
