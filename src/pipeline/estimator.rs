@@ -19,9 +19,11 @@ use crate::solve::surfaces::{
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Estimator {
-    /// The surface-domain fit, started from the per-pixel surfaces where
-    /// the per-pixel route measures any; the per-pixel result where the
-    /// schedule is one the surface-domain fit does not model (phase shifting).
+    /// The surface-domain fit where the reflections are closer than
+    /// [`DIRECT_BELOW_BINS`] (median over the pixels) or the per-pixel route
+    /// measures nothing, started from the per-pixel surfaces where those
+    /// exist; the per-pixel route elsewhere, and where the schedule is one
+    /// the surface-domain fit does not model (phase shifting).
     #[default]
     Auto,
     /// Screen points per pixel, then the surfaces fitted to them.
@@ -29,6 +31,16 @@ pub enum Estimator {
     /// The surface-domain fit; an error where it cannot run.
     Direct,
 }
+
+/// Median front–back separation (Fourier bins) below which `auto` fits the
+/// surfaces to the frames. Measured (`mfd bench thin`, 48×48 bench, paper
+/// schedule, 5 % noise, 3 seeds; docs/figures.md): at 0.43–0.45 bins the
+/// per-pixel route's front is 1.4–2.0× its bound, the surface-domain fit's
+/// 0.83–0.84×; at 0.89–2.75 bins the per-pixel route is at 0.93–1.09× and
+/// the surface-domain fit at 1.12–1.21× (its weights follow each pixel's
+/// own amplitudes and noise, which the per-pixel route smooths); 0.58 bins
+/// (10 mm, n = 2.2): both at 1.1×. Between those, 0.75.
+pub const DIRECT_BELOW_BINS: f64 = 0.75;
 
 /// What the surface-domain fit did, for `summary.json` and the maps.
 #[derive(Debug, Clone)]
@@ -70,7 +82,13 @@ pub(super) fn surfaces_from_frames(
     let cov = maps.screen_cov();
     let obs = Observations::from_maps(station, &maps.screen_coords(), Uncertainty::Cov(&cov))?;
     let per_pixel = solve_surfaces(&obs, station, opts);
-    if estimator == Estimator::PerPixel {
+    let close = direct::median_separation_bins(solver) < DIRECT_BELOW_BINS;
+    let wanted = match estimator {
+        Estimator::PerPixel => false,
+        Estimator::Direct => true,
+        Estimator::Auto => close || per_pixel.is_err(),
+    };
+    if !wanted {
         return per_pixel.map(|s| (obs, s, None));
     }
     let fit = direct::solve(

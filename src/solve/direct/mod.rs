@@ -29,4 +29,6 @@
 pub mod pixel;
 pub mod run;
 
-pub use run::{solve, DirectError, DirectOptions, DirectSolution, Iteration};
+pub use run::{
+    median_separation_bins, solve, DirectError, DirectOptions, DirectSolution, Iteration,
+};

@@ -333,6 +333,38 @@ fn fit(
     })
 }
 
+/// Median over the pixels that see both reflections of their predicted
+/// front–back separation in Fourier bins (the smallest over the
+/// directions, over the schedule's τ span), from the flat plate the
+/// station describes; NaN where no pixel sees both.
+pub fn median_separation_bins(solver: &SpectralSolver) -> f64 {
+    let design = solver.design();
+    let (lo, hi) = design
+        .frames
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), f| {
+            (l.min(f.tau), h.max(f.tau))
+        });
+    let span = hi - lo;
+    let mut seps: Vec<f64> = solver
+        .candidates()
+        .iter()
+        .filter_map(|&c| {
+            let p = &solver.prior().pixels[c as usize];
+            let (f, b) = (p.front.as_ref().ok()?, p.back.as_ref().ok()?);
+            let along = |ax: &crate::solve::spectral::model::Axis| {
+                (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * span
+            };
+            design.axes.iter().map(along).reduce(f64::min)
+        })
+        .collect();
+    if seps.is_empty() {
+        return f64::NAN;
+    }
+    let mid = seps.len() / 2;
+    *seps.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
 /// The start: the per-pixel surfaces, or flat ones with the starting term
 /// count of the surface solver.
 fn start_plate(
