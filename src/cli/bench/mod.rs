@@ -211,7 +211,11 @@ fn direct_timing(
 ) -> anyhow::Result<serde_json::Value> {
     use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
     let station = station.element_frame();
-    let opts = SurfaceOptions::default();
+    // A centred patch of the aperture carries few low-order terms: 15.
+    let opts = SurfaceOptions {
+        terms: Some(15),
+        ..SurfaceOptions::default()
+    };
     let t = std::time::Instant::now();
     let cov = maps.screen_cov();
     let obs = Observations::from_maps(&station, &maps.screen_coords(), Uncertainty::Cov(&cov))?;
