@@ -132,7 +132,7 @@ fn row(
 /// Renders the paper's schedule on the plate of `view` and runs the
 /// spectral solver on it; returns the solver, its maps and the renderer's
 /// gain (counts per unit of normalised intensity).
-fn render_and_solve(
+pub(super) fn render_and_solve(
     station: &Station,
     view: &TracedView,
     params: &SimParams,

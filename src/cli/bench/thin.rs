@@ -14,9 +14,8 @@ use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::report::metrics::rms_difference_nm;
-use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
+use mfd::sim::{RandomSurfaceSpec, SimParams};
 use mfd::solve::direct::{self, DirectOptions};
-use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
 use mfd::solve::surfaces::{
     reconstruct, Observations, SurfaceOptions, SurfaceSolution, Uncertainty,
 };
@@ -116,8 +115,9 @@ fn row(args: &ThinArgs, t: f64, n: f64) -> anyhow::Result<()> {
             seed,
             ..SimParams::default()
         };
-        let (solver, maps) = render_and_solve(&station, &view, &frames, &params, args.engine)?;
-        sep = median_separation(&solver, &view);
+        let (solver, maps, _) =
+            super::thickness::render_and_solve(&station, &view, &params, args.engine)?;
+        sep = direct::median_separation_bins(&solver);
         let cov = maps.screen_cov();
         let obs = Observations::from_maps(&station, &maps.screen_coords(), Uncertainty::Cov(&cov))?;
         let per_pixel = reconstruct(&obs, &station, &surface);
@@ -202,54 +202,6 @@ fn surface_bound(
     let s = scene(station, truth, frames, &opts)?;
     let rms = |std: &[f64]| std.iter().skip(3).map(|s| s * s).sum::<f64>().sqrt();
     Ok([rms(&s.solution.front_std_nm), rms(&s.solution.back_std_nm)])
-}
-
-fn render_and_solve(
-    station: &Station,
-    view: &TracedView,
-    frames: &[FrameInfo],
-    params: &SimParams,
-    engine: mfd::solve::spectral::Engine,
-) -> anyhow::Result<(SpectralSolver, mfd::solve::spectral::SpectralMaps)> {
-    let mut cam = Renderer::new(view, &station.screen, params.clone())?;
-    let patterns = Schedule::default().patterns();
-    let config = SpectralConfig {
-        engine,
-        ..SpectralConfig::default()
-    };
-    let mut solver = SpectralSolver::new(station, frames, config)?;
-    let mut buf = vec![0u16; station.camera.pixel_count()];
-    for (k, p) in patterns.iter().enumerate() {
-        cam.render(p, k as u64, &mut buf);
-        solver.push_frame(k, &buf)?;
-    }
-    let maps = solver.solve()?;
-    Ok((solver, maps))
-}
-
-/// Median front–back separation along the first direction, Fourier bins.
-fn median_separation(solver: &SpectralSolver, view: &TracedView) -> f64 {
-    let ax = solver.design().axes[0];
-    let tau_span = solver
-        .design()
-        .frames
-        .iter()
-        .map(|f| f.tau)
-        .fold(f64::NEG_INFINITY, f64::max)
-        - solver
-            .design()
-            .frames
-            .iter()
-            .map(|f| f.tau)
-            .fold(f64::INFINITY, f64::min);
-    let mut seps: Vec<f64> = view
-        .pixels
-        .iter()
-        .filter_map(|p| Some((p.front.ok()?, p.back.ok()?)))
-        .map(|(f, b)| (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * tau_span)
-        .collect();
-    seps.sort_by(f64::total_cmp);
-    seps.get(seps.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Root mean square over the seeds of each surface's error, and of the
