@@ -111,6 +111,18 @@ pub fn print_uncertainty_source(found: Option<&FoundUncertainty>, station: &Path
 fn print_surfaces(stage: &SurfaceStage) {
     let (sol, summary) = (&stage.solution, &stage.summary);
     let seconds = summary.seconds;
+    if let Some(d) = &summary.direct {
+        let conv = if d.converged {
+            "converged"
+        } else {
+            "did not converge"
+        };
+        println!(
+            "surfaces fitted to the frames (surface-domain fit): {} iterations, {conv}, {:.2} s",
+            d.iterations.len(),
+            d.seconds
+        );
+    }
     if summary.back.is_none() {
         println!("back: not reconstructed (no back reflection was measured)");
     }
@@ -118,7 +130,12 @@ fn print_surfaces(stage: &SurfaceStage) {
         ("front", Some(&summary.front)),
         ("back", summary.back.as_ref()),
     ];
-    for (name, f) in surfaces.into_iter().filter_map(|(n, f)| Some((n, f?))) {
+    for (k, (name, f)) in surfaces.into_iter().enumerate() {
+        let Some(f) = f else { continue };
+        if let Some(why) = &stage.withheld[k] {
+            println!("{name}: not reconstructed: {why}");
+            continue;
+        }
         println!(
             "{name}: {} terms, RMS {:.2} ± {:.2} nm, PV {:.1} nm (piston and tilt removed); \
              surface uncertainty {:.2} nm RMS",

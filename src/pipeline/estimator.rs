@@ -170,7 +170,9 @@ pub fn withheld(
                  designed for this plate (mfd plan) would measure it"
             ));
         }
-        (expected >= figures.rms_nm).then(|| {
+        // With no term beyond tilt (the criterion chose a plane) there is
+        // nothing to resolve: the plane is the answer, not noise.
+        (expected > 0.0 && expected >= figures.rms_nm).then(|| {
             format!(
                 "{what} as large as the fitted surface itself ({:.1} nm RMS): this acquisition \
                  does not resolve it (the two reflections too close for the schedule's τ \
