@@ -104,6 +104,11 @@ pub fn warnings(page: &mut Page, summary: Option<&Summary>, flags: Option<&FlagC
         if s.back.is_none() {
             warn(page, "the back surface was not reconstructed".into());
         }
+        for (name, why) in ["front", "back"].iter().zip(&s.withheld) {
+            if let Some(why) = why {
+                warn(page, format!("the {name} surface is not reported: {why}"));
+            }
+        }
         if s.station.is_none() {
             warn(page, s.uncertainty_note.clone());
         }
@@ -121,8 +126,9 @@ pub fn surfaces(page: &mut Page, dir: &Path, s: &Summary) -> Result<(), ReportEr
     page.heading("Surfaces");
     page.note(&s.figures_note);
     let mut rows = Vec::new();
-    for (name, f) in [("front", Some(&s.front)), ("back", s.back.as_ref())] {
-        let Some(f) = f else {
+    let surfaces = [("front", Some(&s.front)), ("back", s.back.as_ref())];
+    for ((name, f), withheld) in surfaces.into_iter().zip(&s.withheld) {
+        let Some(f) = f.filter(|_| withheld.is_none()) else {
             rows.push(vec![name.into(), "not reconstructed".into()]);
             continue;
         };
@@ -199,12 +205,29 @@ pub fn uncertainty(page: &mut Page, dir: &Path, s: &Summary) -> Result<(), Repor
     Ok(())
 }
 
+/// Which estimator made the surfaces, in words.
+fn estimator(s: &Summary) -> String {
+    match &s.direct {
+        Some(d) => format!(
+            "surfaces fitted to the frames (surface-domain): {} iterations, {}",
+            d.iterations.len(),
+            if d.converged {
+                "converged"
+            } else {
+                "did not converge"
+            }
+        ),
+        None => "per-pixel screen points, then the surfaces".into(),
+    }
+}
+
 /// The surface fit: pixels, stages, χ², condition number.
 pub fn fit(page: &mut Page, s: &Summary) {
     page.heading("Surface fit");
     page.table(
         &["", ""],
         &[
+            vec!["estimator".into(), estimator(s)],
             vec![
                 "pixels with S1 / S2".into(),
                 format!("{} / {}", s.pixels.s1, s.pixels.s2),
