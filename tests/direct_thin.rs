@@ -16,6 +16,7 @@ use mfd::pipeline::{self, Estimator, Input, Options, SurfaceStage};
 use mfd::report::metrics::rms_difference_nm;
 use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
+use mfd::solve::surfaces::report::figures;
 use mfd::solve::surfaces::{SurfaceError, SurfaceOptions};
 
 const TERMS: usize = 15;
@@ -96,8 +97,8 @@ fn bound_nm(c: &Case) -> [f64; 2] {
         bound_stride_px: Some(1),
     };
     let s = scene(&c.station, c.truth.clone(), &c.frames, &opts).unwrap();
-    let rms = |std: &[f64]| std.iter().skip(3).map(|s| s * s).sum::<f64>().sqrt();
-    [rms(&s.solution.front_std_nm), rms(&s.solution.back_std_nm)]
+    let rms = |back| figures(&s.solution, back).error_rms_nm;
+    [rms(false), rms(true)]
 }
 
 /// Error and reported expected error of both surfaces, nm.

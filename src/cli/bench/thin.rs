@@ -16,6 +16,7 @@ use mfd::optics::zernike::ZernikeSurface;
 use mfd::report::metrics::rms_difference_nm;
 use mfd::sim::{RandomSurfaceSpec, SimParams};
 use mfd::solve::direct::{self, DirectOptions};
+use mfd::solve::surfaces::report::figures as surface_figures;
 use mfd::solve::surfaces::{
     reconstruct, Observations, SurfaceOptions, SurfaceSolution, Uncertainty,
 };
@@ -164,7 +165,7 @@ fn figures(sol: &SurfaceSolution, truth: &[Vec<f64>; 2]) -> Figures {
     let std = [&sol.front_std_nm, &sol.back_std_nm];
     for k in 0..2 {
         f.error_nm[k] = rms_difference_nm(fitted[k], &truth[k]);
-        f.reported_nm[k] = std[k].iter().skip(3).map(|s| s * s).sum::<f64>().sqrt();
+        f.reported_nm[k] = surface_figures(sol, k == 1).error_rms_nm;
         for (j, (&c, &s)) in fitted[k].iter().zip(std[k].iter()).enumerate() {
             if j >= 1 && s > 0.0 {
                 let tj = truth[k].get(j).copied().unwrap_or(0.0);
@@ -200,8 +201,8 @@ fn surface_bound(
         bound_stride_px: Some(1),
     };
     let s = scene(station, truth, frames, &opts)?;
-    let rms = |std: &[f64]| std.iter().skip(3).map(|s| s * s).sum::<f64>().sqrt();
-    Ok([rms(&s.solution.front_std_nm), rms(&s.solution.back_std_nm)])
+    let rms = |back| surface_figures(&s.solution, back).error_rms_nm;
+    Ok([rms(false), rms(true)])
 }
 
 /// Root mean square over the seeds of each surface's error, and of the
