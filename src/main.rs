@@ -107,7 +107,7 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("error: {}", error_chain(&err));
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(cli::exit::classify(&err).code())
         }
     }
 }

@@ -7,6 +7,7 @@ pub mod calibrate_solve;
 pub mod compare;
 pub mod compare_interferometer;
 pub mod display;
+pub mod exit;
 pub mod measure;
 pub mod output;
 pub mod plan;
