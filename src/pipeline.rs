@@ -31,10 +31,14 @@ use crate::solve::surfaces::{
     Uncertainty,
 };
 
+pub mod consistency;
 mod estimator;
+pub mod result_dir;
 mod station_uncertainty;
 
+pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
 pub use estimator::{withheld, DirectReport, Estimator};
+pub use result_dir::{InputFile, Inputs, Staged};
 
 use crate::budget::assemble::budget;
 use crate::budget::refine::{refine, RefineError, Refined};
@@ -86,6 +90,19 @@ pub enum PipelineError {
         #[source]
         source: std::io::Error,
     },
+    /// A result folder cannot be used (a file, or a folder that is not
+    /// an mfd result).
+    #[error("{path}: {problem}")]
+    Output {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        problem: String,
+    },
+    /// The data hold nothing the stages can measure: which pixels were
+    /// looked at and what was found, in words.
+    #[error("{0}")]
+    NoSignal(String),
     /// A station uncertainty file could not be read.
     #[error(transparent)]
     Uncertainty(#[from] UncertaintyError),
@@ -241,6 +258,9 @@ pub struct Options {
     /// not reconstructed, with the reason; `None`: only the rule of
     /// [`withheld`] (an expected error as large as the surface).
     pub max_expected_nm: Option<f64>,
+    /// The checks of the spectral stage's points against the noise and
+    /// the station ([`consistency`]).
+    pub limits: Limits,
 }
 
 /// The spectral stage's result.
@@ -254,6 +274,8 @@ pub struct SpectralStage {
     pub read_s: f64,
     /// Seconds of the solve after the last frame.
     pub solve_s: f64,
+    /// The points checked against the noise and the station.
+    pub consistency: Consistency,
 }
 
 /// The surface stage's result.
@@ -286,6 +308,9 @@ pub struct Reconstruction {
     /// The surface stage: absent when not asked for, an error when it could
     /// not run (the spectral maps are still there to be written).
     pub surfaces: Option<Result<SurfaceStage, SurfaceError>>,
+    /// What the result was made from (set by the caller, who knows the
+    /// paths); written as `inputs.json` and into `summary.json`.
+    pub inputs: Option<Inputs>,
 }
 
 /// Runs the stages `options` asks for on `input`. `progress(done, total)`
@@ -313,18 +338,26 @@ pub fn reconstruct(
             let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
             let total = acq.frames().len();
             let mut frame = Vec::new();
+            let mut max_count = 0u16;
             for k in 0..total {
                 let index = acq.frames()[k].index;
                 acq.read_frame(index, &mut frame)?;
+                max_count = frame.iter().copied().fold(max_count, u16::max);
                 solver.push_frame(index, &frame)?;
                 progress(k + 1, total);
             }
-            let stage = spectral_stage(&mut solver, t0.elapsed().as_secs_f64())?;
+            let stage = spectral_stage(
+                &mut solver,
+                station,
+                options,
+                t0.elapsed().as_secs_f64(),
+                Some(max_count),
+            )?;
             owned = solver;
             (First::Spectral(stage), Some(&owned))
         }
         Input::Streamed(solver) => (
-            First::Spectral(spectral_stage(solver, 0.0)?),
+            First::Spectral(spectral_stage(solver, station, options, 0.0, None)?),
             Some(&*solver),
         ),
         Input::ScreenPoints(points) => (First::Points(points), None),
@@ -337,7 +370,11 @@ pub fn reconstruct(
         First::Spectral(s) => Some(s),
         First::Points(_) => None,
     };
-    Ok(Reconstruction { spectral, surfaces })
+    Ok(Reconstruction {
+        spectral,
+        surfaces,
+        inputs: None,
+    })
 }
 
 /// Where the surface stage's screen points come from.
@@ -451,17 +488,34 @@ fn refine_station(
     })
 }
 
+/// The spectral stage's fit, its points checked against the noise and the
+/// station, and (when it measured nothing) the reason in words, before the
+/// surface stage fails on the absence.
 fn spectral_stage(
     solver: &mut SpectralSolver,
+    station: &Station,
+    options: &Options,
     read_s: f64,
+    max_count: Option<u16>,
 ) -> Result<SpectralStage, PipelineError> {
     let t = Instant::now();
-    let maps = solver.solve()?;
+    let mut maps = solver.solve()?;
+    let consistency = consistency::check(
+        &mut maps,
+        solver.prior(),
+        station,
+        solver.frames(),
+        options.limits,
+    );
+    if let Some(why) = consistency::why_nothing(&maps, solver.candidate_pixels(), max_count) {
+        return Err(PipelineError::NoSignal(why));
+    }
     Ok(SpectralStage {
         maps,
         fitted_pixels: solver.candidate_pixels(),
         read_s,
         solve_s: t.elapsed().as_secs_f64(),
+        consistency,
     })
 }
 
@@ -479,20 +533,34 @@ impl Reconstruction {
             source,
         })?;
         let mut written = Vec::new();
+        let inputs = self.inputs.clone().unwrap_or_else(Inputs::new);
+        let path = out.join(result_dir::INPUTS_FILE);
+        write_json(&path, &inputs)?;
+        written.push(path);
         if let Some(s) = &self.spectral {
             s.maps.write(out)?;
             written.push(out.join("screen_coords.npy"));
+            let path = out.join("consistency.json");
+            write_json(&path, &s.consistency)?;
+            written.push(path);
         }
         if let Some(Ok(stage)) = &self.surfaces {
-            written.extend(write_surfaces(out, stage)?);
+            let mut summary = stage.summary.clone();
+            summary.inputs = Some(inputs);
+            summary.consistency = self.spectral.as_ref().map(|s| s.consistency.clone());
+            written.extend(write_surfaces(out, stage, &summary)?);
         }
         Ok(written)
     }
 }
 
 /// The surface stage's files in `out`.
-fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, PipelineError> {
-    let (sol, summary) = (&stage.solution, &stage.summary);
+fn write_surfaces(
+    out: &Path,
+    stage: &SurfaceStage,
+    summary: &Summary,
+) -> Result<Vec<PathBuf>, PipelineError> {
+    let sol = &stage.solution;
     let mut written = vec![out.join("surfaces.json")];
     surfaces_file(stage).save(&written[0])?;
     if let Some(r) = &stage.refined {
@@ -559,16 +627,21 @@ fn write_surfaces(out: &Path, stage: &SurfaceStage) -> Result<Vec<PathBuf>, Pipe
     }
     written.extend(pictures::breakdown(out, summary)?);
     let path = out.join("summary.json");
-    let text = serde_json::to_string_pretty(summary).map_err(|source| PipelineError::Json {
-        path: path.clone(),
-        source,
-    })?;
-    std::fs::write(&path, text + "\n").map_err(|source| PipelineError::Io {
-        path: path.clone(),
-        source,
-    })?;
+    write_json(&path, summary)?;
     written.push(path);
     Ok(written)
+}
+
+/// `value` as pretty JSON in `path`.
+fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), PipelineError> {
+    let text = serde_json::to_string_pretty(value).map_err(|source| PipelineError::Json {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    std::fs::write(path, text + "\n").map_err(|source| PipelineError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Why the back is absent from `surfaces.json` when it was not fitted.

@@ -103,6 +103,8 @@ pub struct MeasureArgs {
     spectral: super::SpectralArgs,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
+    #[command(flatten)]
+    checks: super::CheckArgs,
     /// Serve the operator's console (live preview, progress, stop, results)
     /// on PORT (127.0.0.1) or HOST:PORT; any but a loopback address needs
     /// the token printed at start. It stays open after the run until Ctrl-C.
@@ -478,6 +480,7 @@ fn finish(
         refine: args.refine.clone(),
         estimator,
         max_expected_nm,
+        limits: args.checks.limits(),
         ..Options::default()
     };
     let mut fitting = |done: usize, total: usize| {
@@ -496,7 +499,21 @@ fn finish(
         }
     }
     let result = args.out.join("result");
-    super::output::write_and_print(&rec, &result)?;
+    let mut inputs = mfd::pipeline::Inputs::new();
+    let manifest = args
+        .out
+        .join("acquisition")
+        .join(mfd::acquire::acquisition::MANIFEST);
+    inputs.acquisition =
+        mfd::pipeline::InputFile::of(&manifest)
+            .ok()
+            .map(|m| mfd::pipeline::InputFile {
+                path: args.out.join("acquisition").display().to_string(),
+                sha256: m.sha256,
+            });
+    inputs.station = mfd::pipeline::InputFile::of(&args.station).ok();
+    rec.inputs = Some(inputs);
+    super::output::write_and_print(&rec, &result, &args.checks)?;
     // The acquisition holds a copy of the station: the calibration is
     // where --station came from.
     let options = mfd::report::page::ReportOptions {

@@ -103,6 +103,53 @@ impl SpectralArgs {
     }
 }
 
+/// The checks of the spectral stage's points against the noise and the
+/// station, shared by `mfd reconstruct` and `mfd measure`.
+#[derive(clap::Args, Clone)]
+pub struct CheckArgs {
+    /// Largest departure of either surface from flat, nm RMS of defocus,
+    /// that the check of the screen points against the station allows:
+    /// points displaced from the station's flat-plate prediction by more
+    /// than such surfaces (and the station's tolerance) explain flag the
+    /// result as inconsistent, and single pixels as far from the station.
+    #[arg(long, default_value_t = mfd::pipeline::DEFAULT_MAX_DEPARTURE_NM, value_parser = positive_f64)]
+    pub max_departure_nm: f64,
+    /// The station's own share of that spread (calibration, the element's
+    /// placement), screen px.
+    #[arg(long, default_value_t = 3.0, value_parser = non_negative_f64)]
+    pub station_spread_px: f64,
+    /// Exit 0 even when the screen points contradict the station (the
+    /// result is still flagged in consistency.json and summary.json).
+    #[arg(long)]
+    pub accept_inconsistent: bool,
+}
+
+impl CheckArgs {
+    /// The pipeline's limits.
+    pub fn limits(&self) -> mfd::pipeline::Limits {
+        mfd::pipeline::Limits {
+            max_departure_nm: self.max_departure_nm,
+            station_spread_px: self.station_spread_px,
+        }
+    }
+}
+
+/// A finite number > 0.
+fn positive_f64(s: &str) -> Result<f64, String> {
+    let x: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    (x.is_finite() && x > 0.0)
+        .then_some(x)
+        .ok_or_else(|| format!("{s}: needs a finite number > 0"))
+}
+
+/// A finite number ≥ 0.
+fn non_negative_f64(s: &str) -> Result<f64, String> {
+    let x: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    (x.is_finite() && x >= 0.0)
+        .then_some(x)
+        .ok_or_else(|| format!("{s}: needs a finite number ≥ 0"))
+}
+
 /// The pattern schedule flags, shared by every command that shows patterns.
 #[derive(clap::Args, Clone)]
 pub struct ScheduleArgs {

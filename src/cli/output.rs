@@ -3,27 +3,85 @@
 
 use std::path::Path;
 
-use mfd::pipeline::{FoundUncertainty, Reconstruction, SurfaceStage, UncertaintySource};
+use mfd::pipeline::{
+    FoundUncertainty, PipelineError, Reconstruction, Staged, SurfaceStage, UncertaintySource,
+};
+
+use super::exit::{classified, Class};
 use mfd::solve::spectral::{PixelFlags, SpectralMaps};
 
-/// Writes a reconstruction into `out` and prints what it found; a surface
-/// stage that could not run is the command's error, after the spectral maps
-/// are written. `mfd measure` calls this with its streamed solver's result.
-pub fn write_and_print(rec: &Reconstruction, out: &Path) -> anyhow::Result<()> {
-    rec.write(out)?;
+/// Writes a reconstruction into `out` and prints what it found. The result
+/// is written beside `out` and renamed into place only when complete
+/// ([`Staged`]): a surface stage that could not run is the command's error,
+/// `out` keeps the previous complete result (or stays absent), and this
+/// run's spectral maps are kept in `OUT.failed` with the error. A result
+/// whose points contradict the station is written, flagged, and (without
+/// `--accept-inconsistent`) exits with [`Class::Inconsistent`]'s status.
+/// `mfd measure` calls this with its streamed solver's result.
+pub fn write_and_print(
+    rec: &Reconstruction,
+    out: &Path,
+    checks: &super::CheckArgs,
+) -> anyhow::Result<()> {
+    let staged = Staged::begin(out).map_err(pipeline_error)?;
+    if let Err(e) = rec.write(staged.path()) {
+        let msg = e.to_string();
+        let kept = staged.fail(&msg)?;
+        return Err(anyhow::anyhow!(
+            "{msg}; {} is unchanged; what this run wrote is in {}",
+            out.display(),
+            kept.display()
+        ));
+    }
     if let Some(s) = &rec.spectral {
         summarise(&s.maps, s.fitted_pixels, s.read_s, s.solve_s);
+        println!("check against the station: {}", s.consistency.note);
+    }
+    if let Some(Err(e)) = &rec.surfaces {
+        let msg = format!("surface stage: {e}");
+        let kept = staged.fail(&msg)?;
+        return Err(anyhow::anyhow!(
+            "{msg}; {} is unchanged (the previous result, if any); this run's spectral maps \
+             are in {}",
+            out.display(),
+            kept.display()
+        ));
+    }
+    staged.commit()?;
+    if let Some(Ok(stage)) = &rec.surfaces {
+        print_surfaces(stage);
+        println!("wrote {}", out.join("surfaces.json").display());
+    } else if rec.spectral.is_some() {
         println!("wrote {}", out.join("screen_coords.npy").display());
     }
-    match &rec.surfaces {
-        None => Ok(()),
-        Some(Err(e)) => Err(anyhow::anyhow!("surface stage: {e}")),
-        Some(Ok(stage)) => {
-            print_surfaces(stage);
-            println!("wrote {}", out.join("surfaces.json").display());
-            Ok(())
-        }
+    match rec.spectral.as_ref().map(|s| &s.consistency) {
+        Some(c) if !c.consistent && !checks.accept_inconsistent => Err(classified(
+            Class::Inconsistent,
+            anyhow::anyhow!(
+                "{}; the result in {} is complete but flagged (consistency.json, summary.json \
+                 \"consistency\"); if the station is right and the part departs that far from \
+                 flat, rerun with --max-departure-nm, or --accept-inconsistent to exit 0",
+                c.note,
+                out.display()
+            ),
+        )),
+        _ => Ok(()),
     }
+}
+
+/// A pipeline error with the exit class of its kind: bad input files and
+/// result folders, data with nothing to measure, the rest failures.
+pub fn pipeline_error(e: PipelineError) -> anyhow::Error {
+    let class = match &e {
+        PipelineError::NoSignal(_) => Class::NoSignal,
+        PipelineError::Output { .. }
+        | PipelineError::Acquisition(_)
+        | PipelineError::Shape { .. }
+        | PipelineError::Uncertainty(_)
+        | PipelineError::UncertaintyOfAnotherStation { .. } => Class::Input,
+        _ => Class::Failure,
+    };
+    classified(class, e.into())
 }
 
 fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {

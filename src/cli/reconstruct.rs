@@ -10,7 +10,8 @@ use mfd::acquire::acquisition::Acquisition;
 use mfd::optics::station::{Dof, Station, StationUncertainty};
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::find_station_uncertainty;
-use mfd::pipeline::{self, Input, Options, ScreenPoints};
+use mfd::pipeline::result_dir::sha256_file;
+use mfd::pipeline::{self, Input, InputFile, Inputs, Options, ScreenPoints};
 use mfd::solve::spectral::{PixelFlags, SpectralConfig};
 
 /// Arguments of `mfd reconstruct`.
@@ -79,6 +80,8 @@ pub struct ReconstructArgs {
     spectral: super::SpectralArgs,
     #[command(flatten)]
     surfaces: super::surfaces_stage::SurfaceArgs,
+    #[command(flatten)]
+    checks: super::CheckArgs,
 }
 
 /// Runs `mfd reconstruct`.
@@ -114,6 +117,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         refine: args.refine.clone(),
         estimator,
         max_expected_nm,
+        limits: args.checks.limits(),
     };
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
@@ -127,7 +131,18 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         &mut |done, _| bar.set_position(done as u64),
     );
     bar.finish_and_clear();
-    super::output::write_and_print(&result?, &args.out)
+    let mut rec = result.map_err(super::output::pipeline_error)?;
+    let mut inputs = Inputs::new();
+    inputs.acquisition = Some(InputFile {
+        path: acq_dir.display().to_string(),
+        sha256: sha256_file(acq.manifest_path()).map_err(super::output::pipeline_error)?,
+    });
+    inputs.frames = Some(acq.frames().len());
+    inputs.station = Some(InputFile::of(&station_path).map_err(super::output::pipeline_error)?);
+    inputs.uncertainty =
+        uncertainty_path(args, &station_path, options.station_uncertainty.is_some());
+    rec.inputs = Some(inputs);
+    super::output::write_and_print(&rec, &args.out, &args.checks)
 }
 
 /// The surface stage alone, from a screen_coords.npy.
@@ -151,13 +166,20 @@ fn from_screen_coords(
         refine: args.refine.clone(),
         ..Options::default()
     };
-    let rec = pipeline::reconstruct(
+    let mut rec = pipeline::reconstruct(
         Input::ScreenPoints(points),
         &station,
         &options,
         &mut |_, _| {},
-    )?;
-    super::output::write_and_print(&rec, &args.out)
+    )
+    .map_err(super::output::pipeline_error)?;
+    let mut inputs = Inputs::new();
+    inputs.screen_coords = Some(InputFile::of(coords_path).map_err(super::output::pipeline_error)?);
+    inputs.station = Some(InputFile::of(station_path).map_err(super::output::pipeline_error)?);
+    inputs.uncertainty =
+        uncertainty_path(args, station_path, options.station_uncertainty.is_some());
+    rec.inputs = Some(inputs);
+    super::output::write_and_print(&rec, &args.out, &args.checks)
 }
 
 /// The station's uncertainty: `--uncertainty`, else the calibration's file
@@ -175,6 +197,23 @@ fn uncertainty(
     let found = find_station_uncertainty(station_path, station, args.uncertainty.as_deref())?;
     super::output::print_uncertainty_source(found.as_ref(), station_path);
     Ok(found.map(|f| f.uncertainty))
+}
+
+/// The uncertainty file used, with its digest: `--uncertainty`, else the
+/// calibration's file beside the station.
+fn uncertainty_path(
+    args: &ReconstructArgs,
+    station_path: &std::path::Path,
+    used: bool,
+) -> Option<InputFile> {
+    if !used {
+        return None;
+    }
+    let path = args
+        .uncertainty
+        .clone()
+        .unwrap_or_else(|| station_path.with_file_name(mfd::pipeline::STATION_UNCERTAINTY_FILE));
+    InputFile::of(&path).ok()
 }
 
 /// `--out`'s long help: every file, with the flag bits of `flags.npy` from

@@ -82,6 +82,12 @@ pub struct Summary {
     /// they are (`surfaces.json`'s `not_reconstructed_because`).
     #[serde(default)]
     pub withheld: [Option<String>; 2],
+    /// What the result was made from (paths and SHA-256 digests).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inputs: Option<crate::pipeline::Inputs>,
+    /// The spectral stage's points checked against the station.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub consistency: Option<crate::pipeline::Consistency>,
 }
 
 fn per_pixel() -> String {
@@ -332,6 +338,8 @@ impl Summary {
             estimator: per_pixel(),
             direct: None,
             withheld: [None, None],
+            inputs: None,
+            consistency: None,
         }
     }
 

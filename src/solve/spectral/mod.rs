@@ -79,13 +79,21 @@ bitflags::bitflags! {
         /// the station's prediction that the statistics keep, or (with
         /// `NO_SIGNAL`) the band holds no signal — it may lie outside: both NaN.
         const OUT_OF_BAND = 512;
+        /// The fit's residual is far above the noise of pixels as bright
+        /// (a χ² test, `pipeline`'s quality pass): not reported, both NaN.
+        const POOR_FIT = 1024;
+        /// The fitted points lie far from where the station puts them,
+        /// beyond what the surfaces and the station's tolerance allow
+        /// relative to the other pixels (a wrong fringe, an alias): not
+        /// reported, both NaN.
+        const FAR_FROM_PRIOR = 2048;
     }
 }
 
 impl PixelFlags {
     /// Every flag with what it means in a few words: the table of
     /// `mfd reconstruct --help` and of the printed summary.
-    pub const MEANINGS: [(PixelFlags, &'static str); 10] = [
+    pub const MEANINGS: [(PixelFlags, &'static str); 12] = [
         (PixelFlags::NO_DATA, "no data"),
         (PixelFlags::NO_SIGNAL, "no fringe signal"),
         (PixelFlags::SATURATED, "saturated samples excluded"),
@@ -101,6 +109,11 @@ impl PixelFlags {
         (
             PixelFlags::OUT_OF_BAND,
             "outside the band the statistics engine keeps",
+        ),
+        (PixelFlags::POOR_FIT, "residual far above the noise"),
+        (
+            PixelFlags::FAR_FROM_PRIOR,
+            "far from where the station puts the points",
         ),
     ];
 }
@@ -185,7 +198,7 @@ mod flag_tests {
     #[test]
     fn flag_bits_are_the_files_and_every_flag_has_a_meaning() {
         let bits: Vec<u16> = PixelFlags::MEANINGS.iter().map(|(f, _)| f.bits()).collect();
-        assert_eq!(bits, [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]);
+        assert_eq!(bits, [1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048]);
         let union = PixelFlags::MEANINGS
             .iter()
             .fold(PixelFlags::empty(), |acc, (f, _)| acc | *f);

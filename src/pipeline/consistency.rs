@@ -1,0 +1,487 @@
+//! The spectral stage's results checked against the noise and the station,
+//! between the spectral and the surface stage:
+//!
+//! - **Why nothing was measured**, in words, before the surface stage fails
+//!   on its absence: dark frames, no pixel where the station puts the
+//!   element, fringes nowhere near the station's prediction.
+//! - **Fits far above the noise** (a χ² test per pixel, [`PixelFlags::POOR_FIT`]):
+//!   the noise variance at each brightness is the median residual variance
+//!   of the pixels of that brightness (shot noise grows with the count, so
+//!   pixels are compared with those as bright), and a pixel whose residual
+//!   variance exceeds it by [`POOR_FIT_FACTOR`] (or the χ² quantile at
+//!   [`POOR_FIT_FALSE_ALARM`] where few frames make that larger) is not
+//!   reported. The medians hold while fewer than half of a brightness's
+//!   pixels are bad; beyond that the global test below catches the result.
+//! - **Points far from the station's prediction** ([`PixelFlags::FAR_FROM_PRIOR`]):
+//!   relative to the median displacement of all pixels from the flat-plate
+//!   prediction, a pixel displaced by more than its own 5σ beyond the
+//!   spread the surfaces and the station may cause (the planner's prior spread: the station's share
+//!   plus the largest shift a defocus of `max_departure_nm` on both faces
+//!   makes, traced) has locked onto a wrong fringe or an alias.
+//! - **The result against the station** (global): the median displacement
+//!   itself, and the share of pixels far from the prediction. A median
+//!   displacement beyond the spread, or more than half the pixels far from
+//!   it, means the data contradict the station (a wrong τ scale, a
+//!   relabelled direction, a wrong station file): the result is flagged.
+//!
+//! Written by hand: it is a few robust statistics over the maps.
+
+use serde::{Deserialize, Serialize};
+
+use crate::optics::station::Station;
+use crate::optics::trace::TracedView;
+use crate::plan::PlanOptions;
+use crate::solve::spectral::{PixelFlags, SpectralMaps};
+
+/// Residual variance over the noise variance above which a fit is poor: a
+/// residual RMS twice the noise. For the ≥ 30 degrees of freedom of any
+/// schedule the spectral stage fits, the χ² false-alarm probability at 4×
+/// is below 1e-15, so no good pixel is lost to noise; the margin is for
+/// what the median noise model does not follow (pixel-to-pixel gain
+/// differences of a few per cent, the modulation model's small misfit on
+/// real optics).
+pub const POOR_FIT_FACTOR: f64 = 4.0;
+
+/// False-alarm probability of the χ² test where the frame count is small
+/// enough for its quantile to exceed [`POOR_FIT_FACTOR`].
+pub const POOR_FIT_FALSE_ALARM: f64 = 1e-9;
+
+/// The largest departure of either surface from flat, nm RMS of defocus,
+/// that the station check allows by default: λ/0.6 at 633 nm, beyond any
+/// planar optic this instrument is for (a λ/4 PV window is ~40 nm RMS).
+pub const DEFAULT_MAX_DEPARTURE_NM: f64 = 1000.0;
+
+/// A pixel's own σ counted in the reach of the far test: the spectral
+/// stage's resolve criterion (`RESOLVE_SIGMAS`), so that a point is far only
+/// where no noise of its fit reaches the allowed spread.
+pub const FAR_SIGMAS: f64 = 5.0;
+
+/// Fewest measured pixels for the global test to be made.
+pub const MIN_TESTED_PIXELS: usize = 50;
+
+/// The station check in `summary.json` (`"consistency"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Consistency {
+    /// Whether the screen points agree with the station.
+    pub consistent: bool,
+    /// Whether the test was made (enough measured pixels).
+    pub tested: bool,
+    /// Pixels compared (with a measured front point and a predicted one).
+    pub pixels: usize,
+    /// Median displacement of the measured front points from the station's
+    /// flat-plate prediction, screen px (u, v).
+    pub median_displacement_px: [f64; 2],
+    /// The same for the back, where measured.
+    pub median_back_displacement_px: Option<[f64; 2]>,
+    /// The spread the surfaces and the station may cause, screen px.
+    pub allowed_px: f64,
+    /// Surface departure behind `allowed_px`, nm RMS defocus.
+    pub max_departure_nm: f64,
+    /// Pixels flagged far from the prediction.
+    pub far_pixels: usize,
+    /// Pixels flagged with a residual far above the noise.
+    pub poor_fit_pixels: usize,
+    /// In words.
+    pub note: String,
+}
+
+/// What the quality pass takes.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    /// Largest surface departure allowed, nm RMS defocus.
+    pub max_departure_nm: f64,
+    /// The station's own share of the spread, screen px.
+    pub station_spread_px: f64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_departure_nm: DEFAULT_MAX_DEPARTURE_NM,
+            station_spread_px: PlanOptions::default().station_spread_px,
+        }
+    }
+}
+
+/// Why nothing was measured, when no pixel has a front point: `None` when
+/// something was, or when the pixels say only that the reflections were
+/// not separable (the surface-domain estimator's case).
+pub fn why_nothing(
+    maps: &SpectralMaps,
+    candidates: usize,
+    max_count: Option<u16>,
+) -> Option<String> {
+    let found = maps.pixels.iter().filter(|p| p.s[0][0].is_finite()).count();
+    if found > 0 {
+        return None;
+    }
+    if candidates == 0 {
+        return Some(
+            "no camera pixel sees the element where the station puts it (or the region of \
+             interest leaves none): wrong station file, or a region outside the element?"
+                .into(),
+        );
+    }
+    let fitted: Vec<PixelFlags> = maps
+        .pixels
+        .iter()
+        .map(|p| p.flags)
+        .filter(|f| !f.contains(PixelFlags::NO_DATA))
+        .collect();
+    let n = fitted.len().max(1);
+    let share = |f: PixelFlags| fitted.iter().filter(|x| x.intersects(f)).count() as f64 / n as f64;
+    let counts = max_count.map_or(String::new(), |m| {
+        format!(" (largest count in any frame: {m})")
+    });
+    // Flat frames leave every pixel without data (no sample varies) or
+    // without signal.
+    if fitted.is_empty() || share(PixelFlags::NO_SIGNAL) > 0.99 {
+        return Some(format!(
+            "no fringe signal in any of the {candidates} pixels where the station puts the \
+             element: are the frames dark, or the screen not in view?{counts}"
+        ));
+    }
+    if share(PixelFlags::OUT_OF_BAND | PixelFlags::OFFSET_MISMATCH | PixelFlags::FAR_FROM_PRIOR)
+        > 0.5
+    {
+        return Some(format!(
+            "no pixel's fringes lie where the station predicts them ({candidates} pixels \
+             tried): wrong station file, or a manifest whose τ or directions do not match \
+             the frames?{counts}"
+        ));
+    }
+    if share(PixelFlags::POOR_FIT) > 0.5 {
+        return Some(format!(
+            "no pixel's fringes fit the model within the noise ({candidates} pixels tried): \
+             frames that do not match the manifest's schedule?{counts}"
+        ));
+    }
+    None
+}
+
+/// The χ² threshold on residual variance over noise variance for `dof`
+/// degrees of freedom: the larger of [`POOR_FIT_FACTOR`] and the
+/// Wilson–Hilferty quantile at [`POOR_FIT_FALSE_ALARM`].
+pub fn poor_fit_threshold(dof: f64) -> f64 {
+    // z of a one-sided 1e-9 tail.
+    let z = 5.997807;
+    let a = 2.0 / (9.0 * dof.max(1.0));
+    let q = (1.0 - a + z * a.sqrt()).powi(3);
+    q.max(POOR_FIT_FACTOR)
+}
+
+/// Flags fits far above the noise ([`PixelFlags::POOR_FIT`]) and points
+/// far from the prediction ([`PixelFlags::FAR_FROM_PRIOR`]) in `maps`
+/// (their points set to NaN), and returns the global test.
+pub fn check(
+    maps: &mut SpectralMaps,
+    prior: &TracedView,
+    station: &Station,
+    frames: usize,
+    limits: Limits,
+) -> Consistency {
+    let poor_fit_pixels = flag_poor_fits(maps, frames);
+    let allowed_px = allowed_spread(station, prior, limits);
+    // Displacements from the prediction, per reflection.
+    // (pixel, displacement, its own σ) per reflection.
+    let displacement = |maps: &SpectralMaps, r: usize| -> Vec<(usize, [f64; 2], f64)> {
+        maps.pixels
+            .iter()
+            .enumerate()
+            .filter_map(|(k, p)| {
+                let hit = if r == 0 {
+                    prior.pixels.get(k)?.front.as_ref().ok()?
+                } else {
+                    prior.pixels.get(k)?.back.as_ref().ok()?
+                };
+                let s = p.s[r];
+                let sigma = p.std[r][0].hypot(p.std[r][1]);
+                (s[0].is_finite() && s[1].is_finite())
+                    .then(|| (k, [s[0] - hit.u, s[1] - hit.v], sigma))
+            })
+            .collect()
+    };
+    let front = displacement(maps, 0);
+    let back = displacement(maps, 1);
+    let median_of = |d: &[(usize, [f64; 2], f64)]| -> Option<[f64; 2]> {
+        (!d.is_empty())
+            .then(|| [0, 1].map(|c| median(&mut d.iter().map(|x| x.1[c]).collect::<Vec<_>>())))
+    };
+    let m_front = median_of(&front).unwrap_or([f64::NAN; 2]);
+    let m_back = median_of(&back);
+    let mut far = vec![false; maps.pixels.len()];
+    for (d, m) in [(&front, Some(m_front)), (&back, m_back)] {
+        let Some(m) = m else { continue };
+        for (k, x, sigma) in d {
+            // The spread the scene allows plus the pixel's own noise at
+            // the spectral stage's resolve criterion (5σ): a point within
+            // it may be a noisy measure of a true one.
+            let reach = allowed_px + FAR_SIGMAS * sigma.max(0.0);
+            if !((x[0] - m[0]).hypot(x[1] - m[1]) <= reach) {
+                far[*k] = true;
+            }
+        }
+    }
+    let mut far_pixels = 0;
+    for (p, far) in maps.pixels.iter_mut().zip(&far) {
+        if *far {
+            p.flags |= PixelFlags::FAR_FROM_PRIOR;
+            p.s = [[f64::NAN; 2]; 2];
+            p.std = [[f64::NAN; 2]; 2];
+            p.cov = [[f64::NAN; 4]; 4];
+            far_pixels += 1;
+        }
+    }
+    let pixels = front.len();
+    let tested = pixels >= MIN_TESTED_PIXELS;
+    let size = |m: [f64; 2]| m[0].hypot(m[1]);
+    let worst = size(m_front).max(m_back.map_or(0.0, size));
+    let far_share = far_pixels as f64 / pixels.max(1) as f64;
+    let consistent = !tested || (worst <= allowed_px && far_share <= 0.5);
+    let note = if !tested {
+        format!(
+            "not tested: {pixels} pixels with a measured front point (needs {MIN_TESTED_PIXELS})"
+        )
+    } else if consistent {
+        format!(
+            "the screen points agree with the station: median displacement {worst:.2} px \
+             from its flat-plate prediction, within the {allowed_px:.1} px that surfaces of up \
+             to {:.0} nm RMS and the station's tolerance allow; {far_pixels} pixels flagged \
+             far from it, {poor_fit_pixels} with a residual far above the noise",
+            limits.max_departure_nm
+        )
+    } else {
+        format!(
+            "the screen points contradict the station: median displacement {worst:.1} px from \
+             its flat-plate prediction (allowed {allowed_px:.1} px for surfaces of up to {:.0} \
+             nm RMS and the station's tolerance), {:.0} % of {pixels} pixels far from it: a \
+             wrong station file, τ scale or direction label in the manifest?",
+            limits.max_departure_nm,
+            100.0 * far_share
+        )
+    };
+    Consistency {
+        consistent,
+        tested,
+        pixels,
+        median_displacement_px: m_front,
+        median_back_displacement_px: m_back,
+        allowed_px,
+        max_departure_nm: limits.max_departure_nm,
+        far_pixels,
+        poor_fit_pixels,
+        note,
+    }
+}
+
+/// The planner's prior spread for `limits` (station share plus the largest
+/// shift a defocus of the allowed departure makes); the station share
+/// alone when the trace fails.
+fn allowed_spread(station: &Station, prior: &TracedView, limits: Limits) -> f64 {
+    let opts = PlanOptions {
+        surface_nm: limits.max_departure_nm,
+        station_spread_px: limits.station_spread_px,
+        ..PlanOptions::default()
+    };
+    crate::plan::ambiguity::prior_spread_px(station, prior, &opts)
+        .unwrap_or(limits.station_spread_px)
+}
+
+/// [`PixelFlags::POOR_FIT`] on every fit whose residual variance exceeds
+/// the noise variance at its brightness by [`poor_fit_threshold`]; returns
+/// how many.
+fn flag_poor_fits(maps: &mut SpectralMaps, frames: usize) -> usize {
+    // (background, residual variance, pixel) of every fit with points.
+    let mut fits: Vec<(f64, f64, usize)> = maps
+        .pixels
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| {
+            p.model > 0
+                && p.s[0][0].is_finite()
+                && p.residual_rms.is_finite()
+                && p.amp[0].is_finite()
+        })
+        .map(|(k, p)| (p.amp[0], p.residual_rms * p.residual_rms, k))
+        .collect();
+    if fits.len() < MIN_TESTED_PIXELS {
+        return 0;
+    }
+    fits.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Brightness classes of ≥ 50 pixels, at most 16: each class's median
+    // residual variance is its noise variance.
+    let classes = (fits.len() / MIN_TESTED_PIXELS).clamp(1, 16);
+    let per = fits.len().div_ceil(classes);
+    // Parameters of the largest model: A, and per direction B, u, φ per
+    // reflection and τ_max — about 8 per direction for two reflections.
+    let dof = frames.saturating_sub(16) as f64;
+    let limit = poor_fit_threshold(dof);
+    let mut flagged = 0;
+    for chunk in fits.chunks(per) {
+        let noise = median(&mut chunk.iter().map(|c| c.1).collect::<Vec<_>>());
+        if !(noise > 0.0) {
+            continue;
+        }
+        for &(_, var, k) in chunk {
+            if var > limit * noise {
+                let p = &mut maps.pixels[k];
+                p.flags |= PixelFlags::POOR_FIT;
+                p.s = [[f64::NAN; 2]; 2];
+                p.std = [[f64::NAN; 2]; 2];
+                p.cov = [[f64::NAN; 4]; 4];
+                flagged += 1;
+            }
+        }
+    }
+    flagged
+}
+
+/// Median of `x` (reordered); NaN when empty.
+fn median(x: &mut [f64]) -> f64 {
+    if x.is_empty() {
+        return f64::NAN;
+    }
+    let mid = x.len() / 2;
+    let (_, m, _) = x.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_chi2_threshold_is_the_factor_for_many_frames_and_the_quantile_for_few() {
+        assert_eq!(poor_fit_threshold(2000.0), POOR_FIT_FACTOR);
+        // 4 degrees of freedom: the 1e-9 quantile of χ²₄ is 47.6 (tables),
+        // 11.9 per degree of freedom; Wilson–Hilferty is within 15 % there.
+        let q = poor_fit_threshold(4.0);
+        assert!((q - 11.9).abs() < 0.15 * 11.9, "{q}");
+    }
+}
+
+#[cfg(test)]
+mod scene_tests {
+    //! Case 6 of issue 19 on maps built from the independent fixture's
+    //! station: every pixel measured at its flat-plate prediction with
+    //! noise, then some pixels given an alias (30–100 px off) or a residual
+    //! 25× the noise. Before this pass both were reported as found.
+    use super::*;
+    use crate::solve::spectral::{flat_plate_prior, PixelResult};
+    use rand::{Rng, SeedableRng};
+    use rand_distr::StandardNormal;
+
+    fn scene() -> (Station, TracedView, SpectralMaps) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/public-small/station.toml");
+        let station = Station::load(&path).unwrap();
+        let prior = flat_plate_prior(&station, 0.0).unwrap();
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(19);
+        let sigma = 0.25;
+        let pixels = prior
+            .pixels
+            .iter()
+            .map(|p| {
+                let mut r = PixelResult::empty();
+                let (Ok(f), Ok(b)) = (p.front, p.back) else {
+                    return r;
+                };
+                for (i, hit) in [f, b].iter().enumerate() {
+                    let n: [f64; 2] = [rng.sample(StandardNormal), rng.sample(StandardNormal)];
+                    r.s[i] = [hit.u + sigma * n[0], hit.v + sigma * n[1]];
+                    r.std[i] = [sigma, sigma];
+                }
+                // Shot noise: variance 1 + A/100 counts², A 50…250.
+                let a: f64 = rng.random_range(50.0..250.0);
+                let var = 1.0 + a / 100.0;
+                let chi2: f64 = (0..400)
+                    .map(|_| rng.sample::<f64, _>(StandardNormal).powi(2))
+                    .sum::<f64>()
+                    / 400.0;
+                r.amp = [a, 30.0, 20.0, f64::NAN];
+                r.residual_rms = (var * chi2).sqrt();
+                r.model = 2;
+                r
+            })
+            .collect();
+        let maps = SpectralMaps {
+            width: prior.width,
+            height: prior.pixels.len() / prior.width,
+            pixels,
+            preferred: Vec::new(),
+            scene_model: 2,
+            bic_sums: [0.0; 3],
+            saturation_counts: None,
+        };
+        (station, prior, maps)
+    }
+
+    #[test]
+    fn aliases_and_fits_far_above_the_noise_are_flagged_and_good_pixels_kept() {
+        let (station, prior, mut maps) = scene();
+        let measured: Vec<usize> = (0..maps.pixels.len())
+            .filter(|&k| maps.pixels[k].s[0][0].is_finite())
+            .collect();
+        assert!(measured.len() > 500, "{}", measured.len());
+        // Every 20th measured pixel on an alias 30–100 px away, every 20th
+        // (offset by 10) with a residual 25× the noise.
+        let (mut aliased, mut poor) = (Vec::new(), Vec::new());
+        for (i, &k) in measured.iter().enumerate() {
+            let p = &mut maps.pixels[k];
+            if i % 20 == 0 {
+                let d = 30.0 + 70.0 * (i as f64 / measured.len() as f64);
+                p.s[0][0] += d;
+                aliased.push(k);
+            } else if i % 20 == 10 {
+                p.residual_rms *= 25.0;
+                poor.push(k);
+            }
+        }
+        let c = check(&mut maps, &prior, &station, 400, Limits::default());
+        for &k in &aliased {
+            assert!(
+                maps.pixels[k].flags.contains(PixelFlags::FAR_FROM_PRIOR),
+                "pixel {k}"
+            );
+            assert!(maps.pixels[k].s[0][0].is_nan());
+        }
+        for &k in &poor {
+            assert!(
+                maps.pixels[k].flags.contains(PixelFlags::POOR_FIT),
+                "pixel {k}"
+            );
+        }
+        // Good pixels: none lost (5σ plus the spread; a χ² tail of 1e-15).
+        let lost = measured
+            .iter()
+            .filter(|k| !aliased.contains(k) && !poor.contains(k))
+            .filter(|&&k| maps.pixels[k].s[0][0].is_nan())
+            .count();
+        assert_eq!(lost, 0);
+        assert_eq!(c.far_pixels, aliased.len());
+        assert_eq!(c.poor_fit_pixels, poor.len());
+        assert!(c.consistent, "{}", c.note);
+    }
+
+    #[test]
+    fn a_global_shift_beyond_the_spread_is_inconsistent_and_flags_no_pixel() {
+        let (station, prior, mut maps) = scene();
+        // Every point 40 px off: a wrong station, not 40 bad pixels.
+        for p in &mut maps.pixels {
+            p.s[0][0] += 40.0;
+            p.s[1][0] += 40.0;
+        }
+        let c = check(&mut maps, &prior, &station, 400, Limits::default());
+        assert!(!c.consistent, "{}", c.note);
+        assert_eq!(c.far_pixels, 0);
+        assert!((c.median_displacement_px[0] - 40.0).abs() < 0.1, "{c:?}");
+        assert!(c.note.contains("contradict"), "{}", c.note);
+        // Within the spread: consistent.
+        let (station, prior, mut maps) = scene();
+        for p in &mut maps.pixels {
+            p.s[0][0] += 1.0;
+        }
+        let c = check(&mut maps, &prior, &station, 400, Limits::default());
+        assert!(c.consistent, "{}", c.note);
+    }
+}
