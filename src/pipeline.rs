@@ -362,10 +362,13 @@ pub fn reconstruct(
         ),
         Input::ScreenPoints(points) => (First::Points(points), None),
     };
-    let surfaces = options
+    let mut surfaces = options
         .surfaces
         .as_ref()
         .map(|opts| surface_stage(&first, solver, station, opts, options));
+    if let (Some(Ok(stage)), First::Spectral(s)) = (&mut surfaces, &first) {
+        stage.summary.consistency = Some(s.consistency.clone());
+    }
     let spectral = match first {
         First::Spectral(s) => Some(s),
         First::Points(_) => None,
@@ -508,7 +511,12 @@ fn spectral_stage(
         options.limits,
     );
     if let Some(why) = consistency::why_nothing(&maps, solver.candidate_pixels(), max_count) {
-        return Err(PipelineError::NoSignal(why));
+        // The surface stage would fail on the absence; without one the
+        // (empty) maps are the result, and the reason a warning.
+        if options.surfaces.is_some() {
+            return Err(PipelineError::NoSignal(why));
+        }
+        log::warn!("{why}");
     }
     Ok(SpectralStage {
         maps,
@@ -546,8 +554,7 @@ impl Reconstruction {
         }
         if let Some(Ok(stage)) = &self.surfaces {
             let mut summary = stage.summary.clone();
-            summary.inputs = Some(inputs);
-            summary.consistency = self.spectral.as_ref().map(|s| s.consistency.clone());
+            summary.inputs = self.inputs.clone();
             written.extend(write_surfaces(out, stage, &summary)?);
         }
         Ok(written)

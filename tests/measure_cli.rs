@@ -17,7 +17,10 @@ fn station() -> String {
 }
 
 /// `mfd measure` on the fixture station with a 2 × 30-pattern schedule
-/// (the default camera `sim`, display `offscreen`).
+/// (the default camera `sim`, display `offscreen`): τ 1…30 in steps of 1,
+/// unambiguous over the whole screen (a step of 2 repeats every point half
+/// a screen away, and the fits came back on those aliases, 1 300 px from
+/// the truth — which the station check now reports).
 fn measure(out: &Path, extra: &[&str]) -> std::process::Output {
     let st = station();
     let out = out.display().to_string();
@@ -28,11 +31,11 @@ fn measure(out: &Path, extra: &[&str]) -> std::process::Output {
         "--out",
         &out,
         "--tau-start",
-        "2",
+        "1",
         "--tau-stop",
-        "60",
+        "30",
         "--tau-step",
-        "2",
+        "1",
         "--noise",
         "0.001",
     ];

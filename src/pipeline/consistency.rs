@@ -69,8 +69,9 @@ pub struct Consistency {
     /// Pixels compared (with a measured front point and a predicted one).
     pub pixels: usize,
     /// Median displacement of the measured front points from the station's
-    /// flat-plate prediction, screen px (u, v).
-    pub median_displacement_px: [f64; 2],
+    /// flat-plate prediction, screen px (u, v); `null` when none was
+    /// measured.
+    pub median_displacement_px: Option<[f64; 2]>,
     /// The same for the back, where measured.
     pub median_back_displacement_px: Option<[f64; 2]>,
     /// The spread the surfaces and the station may cause, screen px.
@@ -207,10 +208,10 @@ pub fn check(
         (!d.is_empty())
             .then(|| [0, 1].map(|c| median(&mut d.iter().map(|x| x.1[c]).collect::<Vec<_>>())))
     };
-    let m_front = median_of(&front).unwrap_or([f64::NAN; 2]);
+    let m_front = median_of(&front);
     let m_back = median_of(&back);
     let mut far = vec![false; maps.pixels.len()];
-    for (d, m) in [(&front, Some(m_front)), (&back, m_back)] {
+    for (d, m) in [(&front, m_front), (&back, m_back)] {
         let Some(m) = m else { continue };
         for (k, x, sigma) in d {
             // The spread the scene allows plus the pixel's own noise at
@@ -235,7 +236,7 @@ pub fn check(
     let pixels = front.len();
     let tested = pixels >= MIN_TESTED_PIXELS;
     let size = |m: [f64; 2]| m[0].hypot(m[1]);
-    let worst = size(m_front).max(m_back.map_or(0.0, size));
+    let worst = m_front.map_or(0.0, size).max(m_back.map_or(0.0, size));
     let far_share = far_pixels as f64 / pixels.max(1) as f64;
     let consistent = !tested || (worst <= allowed_px && far_share <= 0.5);
     let note = if !tested {
@@ -474,7 +475,10 @@ mod scene_tests {
         let c = check(&mut maps, &prior, &station, 400, Limits::default());
         assert!(!c.consistent, "{}", c.note);
         assert_eq!(c.far_pixels, 0);
-        assert!((c.median_displacement_px[0] - 40.0).abs() < 0.1, "{c:?}");
+        assert!(
+            (c.median_displacement_px.unwrap()[0] - 40.0).abs() < 0.1,
+            "{c:?}"
+        );
         assert!(c.note.contains("contradict"), "{}", c.note);
         // Within the spread: consistent.
         let (station, prior, mut maps) = scene();
