@@ -112,6 +112,12 @@ pub fn warnings(page: &mut Page, summary: Option<&Summary>, flags: Option<&FlagC
         if s.station.is_none() {
             warn(page, s.uncertainty_note.clone());
         }
+        if let Some(c) = s.consistency.as_ref().filter(|c| !c.consistent) {
+            warn(
+                page,
+                format!("the result contradicts the station: {}", c.note),
+            );
+        }
     }
     if !any {
         page.fine("nothing to warn about");
