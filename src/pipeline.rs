@@ -507,7 +507,7 @@ fn spectral_stage(
         &mut maps,
         solver.prior(),
         station,
-        solver.frames(),
+        solver.design(),
         options.limits,
     );
     if let Some(why) = consistency::why_nothing(&maps, solver.candidate_pixels(), max_count) {

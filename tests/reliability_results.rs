@@ -256,3 +256,47 @@ fn nothing_measured_is_said_in_words() {
     assert_eq!(code, 4, "{text}");
     assert!(text.contains("no camera pixel sees the element"), "{text}");
 }
+
+/// Case 6, aliases: τ 2…60 in steps of 2 repeats every screen point half a
+/// screen away, and every fit came back on such a copy, ~1 300 px from the
+/// truth, exit 0 with surfaces of ~130 µm RMS and χ²/dof 2e7. Now the
+/// result is flagged (exit 5) and says that the schedule aliases, and how
+/// far apart its copies lie.
+#[test]
+fn fits_on_aliases_of_the_schedule_are_flagged() {
+    let dir = tempfile::tempdir().unwrap();
+    let station = common::public_small().join("station.toml");
+    let acq = dir.path().join("acq");
+    let (code, text) = run(&[
+        "simulate",
+        "--station",
+        station.to_str().unwrap(),
+        "--random-surfaces",
+        "4",
+        "--tau-start",
+        "2",
+        "--tau-stop",
+        "60",
+        "--tau-step",
+        "2",
+        "--noise",
+        "0.001",
+        "--out",
+        acq.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{text}");
+    let r = dir.path().join("R");
+    let (code, text) = run(&[
+        "reconstruct",
+        acq.to_str().unwrap(),
+        "--out",
+        r.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 5, "{text}");
+    assert!(text.contains("repeats every screen point"), "{text}");
+    let c = json(&r.join("consistency.json"));
+    // Step 2 in τ (periods per screen extent along the direction): copies
+    // half that extent apart, ~700–1000 px on a 1600 × 1200 screen.
+    let spacing = c["alias_spacing_px"].as_f64().unwrap();
+    assert!((500.0..1100.0).contains(&spacing), "{c}");
+}

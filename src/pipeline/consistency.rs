@@ -28,9 +28,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::acquire::patterns::FringeAxis;
 use crate::optics::station::Station;
 use crate::optics::trace::TracedView;
 use crate::plan::PlanOptions;
+use crate::solve::spectral::model::Design;
 use crate::solve::spectral::{PixelFlags, SpectralMaps};
 
 /// Residual variance over the noise variance above which a fit is poor: a
@@ -82,6 +84,10 @@ pub struct Consistency {
     pub far_pixels: usize,
     /// Pixels flagged with a residual far above the noise.
     pub poor_fit_pixels: usize,
+    /// The schedule's shortest alias spacing (the nearest false maximum of
+    /// its ambiguity function over the screen, any direction), screen px;
+    /// `null` when no direction has one on the screen.
+    pub alias_spacing_px: Option<f64>,
     /// In words.
     pub note: String,
 }
@@ -178,10 +184,11 @@ pub fn check(
     maps: &mut SpectralMaps,
     prior: &TracedView,
     station: &Station,
-    frames: usize,
+    design: &Design,
     limits: Limits,
 ) -> Consistency {
-    let poor_fit_pixels = flag_poor_fits(maps, frames);
+    let poor_fit_pixels = flag_poor_fits(maps, design.frames.len());
+    let alias_spacing_px = alias_spacing(station, design);
     let allowed_px = allowed_spread(station, prior, limits);
     // Displacements from the prediction, per reflection.
     // (pixel, displacement, its own σ) per reflection.
@@ -239,6 +246,14 @@ pub fn check(
     let worst = m_front.map_or(0.0, size).max(m_back.map_or(0.0, size));
     let far_share = far_pixels as f64 / pixels.max(1) as f64;
     let consistent = !tested || (worst <= allowed_px && far_share <= 0.5);
+    let aliases = match alias_spacing_px {
+        Some(d) if far_pixels > 0 || !consistent => format!(
+            "; this schedule repeats every screen point {d:.0} px away (its τ spacing), so a \
+             fit can lock onto a copy: a schedule without aliases on the screen (finer τ \
+             steps, mfd plan) avoids it"
+        ),
+        _ => String::new(),
+    };
     let note = if !tested {
         format!(
             "not tested: {pixels} pixels with a measured front point (needs {MIN_TESTED_PIXELS})"
@@ -271,8 +286,30 @@ pub fn check(
         max_departure_nm: limits.max_departure_nm,
         far_pixels,
         poor_fit_pixels,
-        note,
+        alias_spacing_px,
+        note: note + &aliases,
     }
+}
+
+/// The shortest distance to a false maximum of the schedule's ambiguity
+/// function over the screen, any direction, without the modulation falloff
+/// (the planner's [`crate::plan::ambiguity::direction_ambiguity`]).
+fn alias_spacing(station: &Station, design: &Design) -> Option<f64> {
+    design
+        .directions_deg
+        .iter()
+        .enumerate()
+        .filter_map(|(d, &deg)| {
+            let taus: Vec<f64> = design
+                .frames
+                .iter()
+                .filter(|f| f.dir == d)
+                .map(|f| f.tau)
+                .collect();
+            let axis = FringeAxis::new(deg, station.screen.width, station.screen.height);
+            crate::plan::ambiguity::direction_ambiguity(&taus, 0.0, &axis).1
+        })
+        .reduce(f64::min)
 }
 
 /// The planner's prior spread for `limits` (station share plus the largest
@@ -372,6 +409,21 @@ mod scene_tests {
     use rand::{Rng, SeedableRng};
     use rand_distr::StandardNormal;
 
+    /// The paper's kind of schedule: τ 0.5…100 step 0.5, both diagonals.
+    fn design(station: &Station) -> Design {
+        let frames = crate::acquire::acquisition::FrameInfo::from_patterns(
+            &crate::acquire::patterns::Schedule {
+                directions_deg: vec![45.0, -45.0],
+                tau_start: 0.5,
+                tau_stop: 100.0,
+                tau_step: 0.5,
+                phases_rad: vec![0.0],
+            }
+            .patterns(),
+        );
+        crate::solve::spectral::design(station, &frames).unwrap()
+    }
+
     fn scene() -> (Station, TracedView, SpectralMaps) {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/fixtures/public-small/station.toml");
@@ -438,7 +490,13 @@ mod scene_tests {
                 poor.push(k);
             }
         }
-        let c = check(&mut maps, &prior, &station, 400, Limits::default());
+        let c = check(
+            &mut maps,
+            &prior,
+            &station,
+            &design(&station),
+            Limits::default(),
+        );
         for &k in &aliased {
             assert!(
                 maps.pixels[k].flags.contains(PixelFlags::FAR_FROM_PRIOR),
@@ -472,7 +530,13 @@ mod scene_tests {
             p.s[0][0] += 40.0;
             p.s[1][0] += 40.0;
         }
-        let c = check(&mut maps, &prior, &station, 400, Limits::default());
+        let c = check(
+            &mut maps,
+            &prior,
+            &station,
+            &design(&station),
+            Limits::default(),
+        );
         assert!(!c.consistent, "{}", c.note);
         assert_eq!(c.far_pixels, 0);
         assert!(
@@ -485,7 +549,13 @@ mod scene_tests {
         for p in &mut maps.pixels {
             p.s[0][0] += 1.0;
         }
-        let c = check(&mut maps, &prior, &station, 400, Limits::default());
+        let c = check(
+            &mut maps,
+            &prior,
+            &station,
+            &design(&station),
+            Limits::default(),
+        );
         assert!(c.consistent, "{}", c.note);
     }
 }
