@@ -12,11 +12,26 @@ use clap::{Parser, Subcommand};
 /// the interchange spec: station.toml (mfd-station/1), acquisition folders
 /// (mfd-acquisition/1), surfaces.json (mfd-surfaces/2; /1 read), screen_coords.npy.
 #[derive(Parser)]
-#[command(name = "mfd", version, about, long_about = None)]
+#[command(name = "mfd", version, about, long_about = None, after_help = EXIT_STATUS)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
+
+/// The exit statuses (`cli::exit::Class`), as `--help` shows them.
+const EXIT_STATUS: &str = "\
+Exit status:
+  0    success: the result is complete
+  1    failure not classed below (a write that failed, a bug)
+  2    bad command line: an unknown option, or a value out of its range
+  3    bad input: a file or option that is not valid input (the error names
+       the file or option, the field and the value), or a --resume whose
+       settings differ from the acquisition's
+  4    no signal: the data hold nothing to measure (too few points for the
+       surfaces)
+  5    inconsistent: the result contradicts the station
+  6    device: the camera or display failed (disconnect, no usable frame)
+  130  interrupted (Ctrl-C): what was recorded is kept; `--resume` continues";
 
 #[derive(Subcommand)]
 enum Command {
@@ -64,6 +79,12 @@ impl log::Log for StderrLogger {
         if !self.enabled(record.metadata()) {
             return;
         }
+        // Other crates' diagnostics (wgpu probing EGL drivers it then does
+        // not use, ...) are not the operator's errors: shown at debug only.
+        let ours = record.target().split("::").next() == Some("mfd");
+        if !ours && log::max_level() < log::LevelFilter::Debug {
+            return;
+        }
         match record.level() {
             log::Level::Error => eprintln!("error: {}", record.args()),
             log::Level::Warn => eprintln!("warning: {}", record.args()),
@@ -84,9 +105,44 @@ fn init_logging() {
     }
 }
 
+/// libwayland (through Mesa's EGL, which wgpu probes for the offscreen
+/// display) prints "error: XDG_RUNTIME_DIR is invalid or not set" unless
+/// the variable names a directory: give it a private 0700 one where it
+/// does not (as `scripts/test.sh` does). Called first in `main`, while
+/// the process has one thread.
+fn ensure_runtime_dir() {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    let given = std::env::var_os("XDG_RUNTIME_DIR").map(std::path::PathBuf::from);
+    if given.is_some_and(|p| p.is_absolute() && p.is_dir()) {
+        return;
+    }
+    // The process's uid, without libc: the owner of /proc/self.
+    let uid = std::fs::metadata("/proc/self").map_or(0, |m| m.uid());
+    let dir = std::env::temp_dir().join(format!("mfd-runtime-{uid}"));
+    let made = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+    let ours = std::fs::metadata(&dir)
+        .is_ok_and(|m| m.is_dir() && m.uid() == uid && m.permissions().mode() & 0o077 == 0);
+    if made.is_ok() || ours {
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
 fn main() -> std::process::ExitCode {
+    ensure_runtime_dir();
     init_logging();
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // --help and --version print to stdout and succeed.
+            let code = if e.use_stderr() {
+                cli::exit::Class::Usage.code()
+            } else {
+                0
+            };
+            let _ = e.print();
+            return std::process::ExitCode::from(code);
+        }
+    };
     let result = match cli.command {
         Command::Trace(args) => cli::trace::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),

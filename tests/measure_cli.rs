@@ -152,7 +152,8 @@ fn ctrl_c_stops_cleanly_with_a_readable_partial_acquisition() {
     assert!(status.success());
     let output = child.wait_with_output().unwrap();
     let log = text(&output);
-    assert!(output.status.success(), "{log}");
+    // Interrupted is not success: the shell's 128 + SIGINT.
+    assert_eq!(output.status.code(), Some(130), "{log}");
     assert!(
         log.contains("stopped after") && log.contains("--resume"),
         "{log}"
@@ -161,6 +162,88 @@ fn ctrl_c_stops_cleanly_with_a_readable_partial_acquisition() {
     let n = acq.frames().len();
     assert!(n > 0 && n < 200, "{n}");
     assert_eq!(acq.complete_frames(), n);
+    // And it resumes.
+    let more = std::process::Command::new(env!("CARGO_BIN_EXE_mfd"))
+        .args([
+            "measure",
+            "--station",
+            &st,
+            "--out",
+            &out,
+            "--tau-start",
+            "1",
+            "--tau-stop",
+            "100",
+            "--tau-step",
+            "1",
+            "--no-reconstruct",
+            "--resume",
+        ])
+        .output()
+        .unwrap();
+    assert!(more.status.success(), "{}", text(&more));
+    assert!(
+        text(&more).contains("200 of 200 recorded"),
+        "{}",
+        text(&more)
+    );
+}
+
+#[test]
+fn exit_statuses_tell_bad_input_from_a_device_fault() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().display().to_string();
+    let run = mfd(&[
+        "measure",
+        "--station",
+        "/nonexistent/station.toml",
+        "--out",
+        &out,
+    ]);
+    assert_eq!(run.status.code(), Some(3), "{}", text(&run));
+    assert!(
+        text(&run).contains("/nonexistent/station.toml"),
+        "{}",
+        text(&run)
+    );
+    // A camera that disconnects is a device fault.
+    let run = measure(
+        dir.path(),
+        &["--sim-disconnect-after", "3", "--no-reconstruct"],
+    );
+    assert_eq!(run.status.code(), Some(6), "{}", text(&run));
+    // A backend not built in is an input (the option names it).
+    let run = measure(dir.path(), &["--display", "HDMI-1", "--overwrite"]);
+    assert_eq!(run.status.code(), Some(3), "{}", text(&run));
+}
+
+#[test]
+fn a_successful_run_prints_no_error() {
+    // Mesa and libwayland complain about a missing XDG_RUNTIME_DIR.
+    let dir = tempfile::tempdir().unwrap();
+    let st = station();
+    let out = dir.path().display().to_string();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_mfd"))
+        .args([
+            "measure",
+            "--station",
+            &st,
+            "--out",
+            &out,
+            "--tau-start",
+            "2",
+            "--tau-stop",
+            "10",
+            "--tau-step",
+            "2",
+            "--no-reconstruct",
+        ])
+        .env_remove("XDG_RUNTIME_DIR")
+        .output()
+        .unwrap();
+    let log = text(&run);
+    assert!(run.status.success(), "{log}");
+    assert!(!log.contains("error"), "{log}");
 }
 
 #[test]

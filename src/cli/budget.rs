@@ -39,23 +39,23 @@ pub struct BudgetArgs {
     #[arg(long)]
     surfaces: Option<PathBuf>,
     /// Read noise, fraction of full scale, as `mfd simulate --noise`.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = 0.05)]
     noise: f64,
     /// The camera's bits per sample (the station file does not carry it).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Modulation falloff τ_max, as `mfd simulate --tau-max`.
-    #[arg(long, default_value_t = 150.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
     tau_max: f64,
     /// Ambient light, as `mfd simulate --ambient`.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.01)]
     ambient: f64,
     /// Zernike terms per surface, fixed.
-    #[arg(long, default_value_t = 36)]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 36)]
     terms: usize,
     /// The bound is evaluated on blocks of this many pixels square
     /// (default: 1 up to 20000 lit pixels, larger beyond).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive_int::<usize>)]
     bound_stride: Option<usize>,
     /// Write the tables as markdown.
     #[arg(long)]
@@ -71,7 +71,7 @@ pub struct BudgetArgs {
     picture: Option<PathBuf>,
     /// Check the linear budget with this many stations drawn from the
     /// covariance, re-traced and reconstructed with the nominal station.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, value_name = "N")]
     monte_carlo: Option<usize>,
     /// Seed of the Monte Carlo draws.
     #[arg(long, default_value_t = 1)]
@@ -86,6 +86,11 @@ fn parse_std(s: &str) -> Result<(String, f64), String> {
         .trim()
         .parse()
         .map_err(|_| format!("`{value}` is not a number (in `{s}`)"))?;
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(format!(
+            "`{s}`: a standard deviation must be finite and at least 0"
+        ));
+    }
     Ok((name.trim().to_string(), v))
 }
 

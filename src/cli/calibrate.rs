@@ -57,10 +57,10 @@ struct TargetsArgs {
     #[arg(long)]
     nominal: PathBuf,
     /// Heights above the reference plane, mm, comma-separated (two or more).
-    #[arg(long, value_delimiter = ',', default_values_t = [0.0, 20.0, 40.0], allow_hyphen_values = true)]
+    #[arg(long, value_parser = super::check::finite, value_delimiter = ',', default_values_t = [0.0, 20.0, 40.0], allow_hyphen_values = true)]
     heights: Vec<f64>,
     /// Targets per height across and down the sensor.
-    #[arg(long, value_delimiter = ',', default_values_t = [3, 3])]
+    #[arg(long, value_parser = super::check::positive_int::<u32>, value_delimiter = ',', default_values_t = [3, 3])]
     grid: Vec<u32>,
     /// A session with 3 or more flat points: positions as its stage
     /// readings (else in the nominal station's world frame).
@@ -93,16 +93,16 @@ struct CaptureArgs {
     #[arg(long, default_value = "sim")]
     camera: String,
     /// Exposure time, µs (the device's value when omitted).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     exposure_us: Option<f64>,
     /// Gain, dB (real cameras).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::finite)]
     gain_db: Option<f64>,
     /// Longest wait for the frame, ms.
-    #[arg(long, default_value_t = 5000)]
+    #[arg(long, value_parser = super::check::positive_int::<u64>, default_value_t = 5000)]
     frame_timeout_ms: u64,
     /// Simulated camera: read noise as a fraction of full scale.
-    #[arg(long, default_value_t = 0.003)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.003)]
     sim_noise: f64,
     /// Simulated camera: seed of the noise.
     #[arg(long, default_value_t = 1)]

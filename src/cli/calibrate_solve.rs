@@ -70,14 +70,14 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// 1σ of a stage reading, µm.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 1.0)]
     stage_std_um: f64,
     /// The display's gamma for the flat's phase-shifting frames.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, value_parser = super::check::gamma, default_value_t = 2.0)]
     display_gamma: f64,
     /// Bin the true camera's sensor by this factor (the same field of view
     /// and distortion in fewer, larger pixels: a quicker session).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, value_parser = super::check::positive_int::<u32>, default_value_t = 1)]
     bin: u32,
 }
 

@@ -22,25 +22,25 @@ pub struct InterferometerArgs {
     pub surface: String,
     /// The map's pixel size, mm (default: the file's; for NPY/CSV without
     /// it, set from the aperture's radius in pixels).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     pub pixel_mm: Option<f64>,
     /// The aperture centre in the map, column,row (pixel centres at +0.5);
     /// default: the centroid of the valid pixels.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(long, value_parser = super::check::finite, value_delimiter = ',', allow_hyphen_values = true)]
     pub center_px: Option<Vec<f64>>,
     /// The measured aperture's radius in map pixels (sets the pixel size
     /// when it is not known); default: from the valid pixels' area.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     pub radius_px: Option<f64>,
     /// Rotation of the map onto mfd's world frame, degrees
     /// (counter-clockwise); default: fitted.
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, value_parser = super::check::finite, allow_hyphen_values = true)]
     pub rotation_deg: Option<f64>,
     /// Mirror the map's columns before rotating (true/false); default: fitted.
     #[arg(long)]
     pub flip: Option<bool>,
     /// NPY/CSV: multiply the stored values by this to get nm (1e9 for metres).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::check::finite, default_value_t = 1.0)]
     pub height_scale_nm: f64,
     /// Print the comparison as JSON (mfd-comparison/1) instead of text.
     #[arg(long)]

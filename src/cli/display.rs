@@ -43,7 +43,7 @@ pub struct DisplayArgs {
     #[arg(long, requires = "offscreen")]
     png: Option<PathBuf>,
     /// Close the window after this many seconds instead of at a key press.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::non_negative)]
     hold_s: Option<f64>,
 }
 

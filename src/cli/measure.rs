@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::live::{Counters, Measurement, Report, SequencerConfig, Start};
+use mfd::live::{sha256_hex, Counters, Measurement, Prepared, Report, SequencerConfig, Start};
 use mfd::optics::station::{Dof, Station};
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
 use mfd::pipeline::{self, find_station_uncertainty, Input, Options};
@@ -57,36 +57,36 @@ pub struct MeasureArgs {
     #[arg(long)]
     sim_surfaces: Option<PathBuf>,
     /// Simulated cameras: read noise, standard deviation as a fraction of full scale.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.0)]
     noise: f64,
     /// Simulated cameras: bits per sample (8, 12 or 16).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::sim_bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Time the display needs after presenting a pattern before it is
     /// settled, ms (LCD response; real monitors take their profile's value).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, value_parser = super::check::range(0.0, 10_000.0, "ms a display takes to settle"), default_value_t = 2.0)]
     settle_ms: f64,
     /// Display gamma for the offscreen renderer's levels (level =
     /// 255·g^(1/γ); the display profiles in hw/ carry it).
-    #[arg(long, default_value_t = 2.2)]
+    #[arg(long, value_parser = super::check::gamma, default_value_t = 2.2)]
     gamma: f64,
     /// Exposure time, µs (real cameras; the device's value when omitted).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     exposure_us: Option<f64>,
     /// Gain, dB (real cameras).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::finite)]
     gain_db: Option<f64>,
     /// Frame rate of a free-running camera, frames/s.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     frame_rate: Option<f64>,
     /// Longest wait for a frame after the settle point, ms.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, value_parser = super::check::positive_int::<u64>, default_value_t = 2000)]
     frame_timeout_ms: u64,
     /// Re-shoots allowed per pattern before giving up.
     #[arg(long, default_value_t = 5)]
     max_reshoots: u32,
     /// Frames each consumer's ring buffer holds.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 16)]
     ring: usize,
     #[command(flatten)]
     faults: FaultArgs,
@@ -111,7 +111,7 @@ pub struct MeasureArgs {
     #[arg(long, value_name = "ADDR", value_parser = super::serve::parse_addr)]
     serve: Option<std::net::SocketAddr>,
     /// With --serve: close the console at most this long after the run, s.
-    #[arg(long, value_name = "SECONDS", requires = "serve")]
+    #[arg(long, value_parser = super::check::non_negative, value_name = "SECONDS", requires = "serve")]
     serve_keep_s: Option<f64>,
 }
 
@@ -119,19 +119,19 @@ pub struct MeasureArgs {
 #[derive(Args, Clone)]
 struct FaultArgs {
     /// Lose every k-th exposure.
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_parser = super::check::positive_int::<u64>, value_name = "K")]
     sim_drop_every: Option<u64>,
     /// Lose each exposure with this probability.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.0)]
     sim_drop_probability: f64,
     /// Expose every k-th triggered frame just before the screen settled.
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_parser = super::check::positive_int::<u64>, value_name = "K")]
     sim_early_every: Option<u64>,
     /// Disconnect after this many frames.
     #[arg(long, value_name = "N")]
     sim_disconnect_after: Option<u64>,
     /// Delay from exposure to delivery, ms.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, value_parser = super::check::range(0.0, 60_000.0, "ms from exposure to delivery"), default_value_t = 0.0)]
     sim_latency_ms: f64,
     /// Seed of the random drops.
     #[arg(long, default_value_t = 1)]
@@ -240,17 +240,18 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
         capacity: args.ring,
     };
     let dir = args.out.join("acquisition");
-    let mut measurement = Measurement::prepare(
-        &station,
+    let station_bytes = std::fs::read(&args.station)
+        .with_context(|| format!("reading {}", args.station.display()))?;
+    let prepared = Prepared {
+        station: &station,
+        station_sha256: &sha256_hex(&station_bytes),
         patterns,
-        camera,
-        display,
         camera_config,
-        &dir,
+        dir: &dir,
         start,
-        solver,
-        sequencer,
-    )?;
+    };
+    let mut measurement =
+        Measurement::prepare_checked(prepared, camera, display, solver, sequencer)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
@@ -457,7 +458,15 @@ fn finish(
              what is there with `mfd reconstruct {}`",
             args.out.join("acquisition").display()
         );
-        return Ok(());
+        return Err(super::exit::classified(
+            super::exit::Class::Interrupted,
+            anyhow::anyhow!(
+                "interrupted by the operator: {} of {} frames recorded in {}",
+                measurement.recorded(),
+                report.counters.total,
+                measurement.dir().display()
+            ),
+        ));
     }
     let Some(solver) = measurement.solver_mut() else {
         return Ok(());

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod budget;
 pub mod calibrate;
 pub mod calibrate_solve;
+pub mod check;
 pub mod compare;
 pub mod compare_interferometer;
 pub mod display;
@@ -64,7 +65,7 @@ pub struct SpectralArgs {
     engine: Engine,
     /// Statistics engine: how many Fourier bins beyond the predicted screen
     /// points (per direction) the kept band reaches.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, value_parser = self::check::positive, default_value_t = 3.0)]
     band_bins: f64,
     /// Search every pixel's fits from its spectrum, instead of starting
     /// each from its row neighbour's where that one found both points (the
@@ -75,7 +76,7 @@ pub struct SpectralArgs {
     /// Display gamma (emitted luminance ∝ level^γ) modelled on
     /// phase-shifting schedules (a few τ, each at ≥ 3 phase steps); without
     /// it (or --display-profile) the display is taken as linearised.
-    #[arg(long, conflicts_with = "display_profile")]
+    #[arg(long, value_parser = self::check::gamma, conflicts_with = "display_profile")]
     display_gamma: Option<f64>,
     /// The display profile (`hw/display/*.toml`) whose `gamma` is modelled,
     /// as --display-gamma.
@@ -154,19 +155,19 @@ fn non_negative_f64(s: &str) -> Result<f64, String> {
 #[derive(clap::Args, Clone)]
 pub struct ScheduleArgs {
     /// Fringe directions, degrees, comma-separated (±45 diagonals, 0, 90).
-    #[arg(long, value_delimiter = ',', default_values_t = [45.0, -45.0], allow_hyphen_values = true)]
+    #[arg(long, value_parser = self::check::range(-360.0, 360.0, "a fringe direction in degrees"), value_delimiter = ',', default_values_t = [45.0, -45.0], allow_hyphen_values = true)]
     pub directions: Vec<f64>,
     /// First τ (fringe periods across the screen).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, value_parser = self::check::positive, default_value_t = 0.2)]
     pub tau_start: f64,
     /// Last τ.
-    #[arg(long, default_value_t = 200.0)]
+    #[arg(long, value_parser = self::check::positive, default_value_t = 200.0)]
     pub tau_stop: f64,
     /// τ step.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, value_parser = self::check::positive, default_value_t = 0.2)]
     pub tau_step: f64,
     /// Phase shifts shown at every τ, radians, comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = [0.0], allow_hyphen_values = true)]
+    #[arg(long, value_parser = self::check::finite, value_delimiter = ',', default_values_t = [0.0], allow_hyphen_values = true)]
     pub phases: Vec<f64>,
 }
 

@@ -26,14 +26,14 @@ pub struct PlanArgs {
     #[command(flatten)]
     flags: super::ScheduleArgs,
     /// Design a schedule of this many frames.
-    #[arg(long, conflicts_with_all = ["time_s", "target_nm"])]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, conflicts_with_all = ["time_s", "target_nm"])]
     frames: Option<usize>,
     /// Design a schedule that takes at most this many seconds.
-    #[arg(long, conflicts_with = "target_nm")]
+    #[arg(long, value_parser = super::check::positive, conflicts_with = "target_nm")]
     time_s: Option<f64>,
     /// Design the shortest schedule whose predicted RMS error of both
     /// surfaces is at most this, nm.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     target_nm: Option<f64>,
     /// Where the designed schedule is written (mfd-schedule/1); needed with a budget.
     #[arg(long)]
@@ -42,50 +42,50 @@ pub struct PlanArgs {
     #[arg(long)]
     json: Option<PathBuf>,
     /// Read noise, fraction of full scale, as `mfd simulate --noise`.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = 0.05)]
     noise: f64,
     /// Modulation falloff τ_max, as `mfd simulate --tau-max`.
-    #[arg(long, default_value_t = 150.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
     tau_max: f64,
     /// The camera's bits per sample.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Ambient light, as `mfd simulate --ambient`.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.01)]
     ambient: f64,
     /// Zernike terms per surface.
-    #[arg(long, default_value_t = 36)]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 36)]
     terms: usize,
     /// The element's thickness, mm (default: the station's).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     thickness_mm: Option<f64>,
     /// The element's refractive index (default: the station's).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::refractive_index)]
     index: Option<f64>,
     /// Expected departure of either surface from flat, nm RMS (sets the prior's spread).
-    #[arg(long, default_value_t = 200.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 200.0)]
     surface_nm: f64,
     /// The station's share of the prior's spread (calibration, placement), screen px.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = 3.0)]
     station_spread_px: f64,
     /// Factor on the back reflection's weight: 0 for an AR-coated back.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = 1.0)]
     back_scale: f64,
     /// Display profile (hw/display/*.toml) whose settle time is used
     /// (default: 30 ms, the paper's LCD).
     #[arg(long)]
     display_profile: Option<PathBuf>,
     /// The display's refresh rate, Hz.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 60.0)]
     display_rate_hz: f64,
     /// The camera's exposure, ms.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 10.0)]
     exposure_ms: f64,
     /// The camera's largest frame rate, Hz.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 30.0)]
     camera_rate_hz: f64,
     /// Largest candidate τ of a design (default 2 τ_max).
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     tau_hi: Option<f64>,
 }
 

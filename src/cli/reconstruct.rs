@@ -61,17 +61,17 @@ pub struct ReconstructArgs {
     third_reflection: bool,
     /// Exclude samples at or above this count; default: the full scale
     /// (2^b − 1) when the data reach it.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive_int::<u16>)]
     saturation: Option<u16>,
     /// Starting τ_max of the modulation falloff; default: the largest τ.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     tau_max_guess: Option<f64>,
     /// Fit pixels up to this many camera pixels beyond where the station
     /// predicts the element.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, value_parser = super::check::int_range(0u32, 4096, "camera pixels beyond the predicted element"), default_value_t = 4)]
     margin_px: u32,
     /// Rim of the element beyond the aperture radius, mm.
-    #[arg(long, default_value_t = DEFAULT_EDGE_MARGIN_MM)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = DEFAULT_EDGE_MARGIN_MM)]
     edge_margin_mm: f64,
     /// Only this region of camera pixels: x0,y0,x1,y1 (columns x0..x1, rows y0..y1).
     #[arg(long, value_delimiter = ',')]
@@ -88,6 +88,18 @@ pub struct ReconstructArgs {
 pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     if args.roi.as_ref().is_some_and(|r| r.len() != 4) {
         anyhow::bail!("--roi takes four numbers x0,y0,x1,y1");
+    }
+    if let Some(&[x0, y0, x1, y1]) = args.roi.as_deref() {
+        anyhow::ensure!(
+            x1 > x0 && y1 > y0,
+            super::exit::classified(
+                super::exit::Class::Input,
+                anyhow::anyhow!(
+                    "--roi {x0},{y0},{x1},{y1}: an empty or reversed region (columns x0..x1, \
+                     rows y0..y1: x1 must exceed x0 and y1 must exceed y0)"
+                )
+            )
+        );
     }
     let surface_opts = args.surfaces.options(args.edge_margin_mm)?;
     let surfaces = (!args.surfaces.no_surfaces).then_some(surface_opts);

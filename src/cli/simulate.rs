@@ -37,22 +37,22 @@ pub struct SimulateArgs {
     #[arg(long = "schedule", value_name = "TOML", conflicts_with_all = ["directions", "tau_start", "tau_stop", "tau_step", "phases"])]
     schedule_file: Option<PathBuf>,
     /// Read noise, standard deviation as a fraction of full scale (0 = exact).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.0)]
     noise: f64,
     /// Full-well capacity, electrons at full scale, to add shot noise.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     full_well: Option<f64>,
     /// Modulation falloff τ_max of exp(−(τ/τ_max)²) (paper Eq. 5).
-    #[arg(long, default_value_t = 150.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
     tau_max: f64,
     /// Ambient light, in units of full-white screen radiance.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, value_parser = super::check::fraction, default_value_t = 0.01)]
     ambient: f64,
     /// Camera counts per unit radiance; default puts the brightest pixel at 90 % of full scale.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     gain: Option<f64>,
     /// Bits per sample: 8, 12 or 16.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Seed of the camera noise.
     #[arg(long, default_value_t = 1)]
@@ -62,13 +62,13 @@ pub struct SimulateArgs {
     third_reflection: bool,
     /// Factors on the back and third paths' Fresnel weights: 0 models an
     /// AR-coated back face (the front reflection alone).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = 1.0)]
     back_scale: f64,
     /// Write one PNG per frame (frames/NNNNNN.png) instead of one frames.npy stack.
     #[arg(long)]
     png: bool,
     /// Distance of the element's rim beyond the aperture radius, mm.
-    #[arg(long, default_value_t = DEFAULT_EDGE_MARGIN_MM)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = DEFAULT_EDGE_MARGIN_MM)]
     edge_margin_mm: f64,
     /// Replace an existing acquisition in --out.
     #[arg(long)]
@@ -76,7 +76,7 @@ pub struct SimulateArgs {
     /// Simulate a mirror (the front reflection alone) on a display that is
     /// not linearised, emitted luminance ∝ level^γ, with the blur acting on
     /// every harmonic of the displayed curve (for phase-shifting schedules).
-    #[arg(long, conflicts_with_all = ["gain", "third_reflection"])]
+    #[arg(long, value_parser = super::check::gamma, conflicts_with_all = ["gain", "third_reflection"])]
     display_gamma: Option<f64>,
 }
 

@@ -20,30 +20,30 @@ pub struct StationArgs {
     #[arg(long, default_value = "hw/display/mtiph-e2m21gm.toml")]
     display: PathBuf,
     /// Lens focal length, mm.
-    #[arg(long, default_value_t = 16.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 16.0)]
     focal_length_mm: f64,
     /// Height of the camera's projection centre above the element, mm.
-    #[arg(long, default_value_t = 825.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 825.0)]
     camera_height_mm: f64,
     /// Height of the screen above the element, mm.
-    #[arg(long, default_value_t = 825.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 825.0)]
     screen_height_mm: f64,
     /// Angle between the camera's axis and the element's normal, degrees
     /// (in the x–z plane; the screen sits at the mirror angle).
-    #[arg(long, default_value_t = 15.0)]
+    #[arg(long, value_parser = super::check::range(-89.0, 89.0, "degrees from the element's normal"), default_value_t = 15.0)]
     tilt_deg: f64,
     /// Refractive index of the element.
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, value_parser = super::check::refractive_index, default_value_t = 1.5)]
     refractive_index: f64,
     /// Element thickness, mm.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 10.0)]
     thickness_mm: f64,
     /// Radius of the measured aperture, mm.
-    #[arg(long, default_value_t = 25.5)]
+    #[arg(long, value_parser = super::check::positive, default_value_t = 25.5)]
     aperture_radius_mm: f64,
     /// The element's tilt about world x, then y, degrees (`element.tilt_deg`
     /// of `mfd-station/2`: an element mounted at an angle to the reference plane).
-    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
+    #[arg(long, value_parser = super::check::range(-45.0, 45.0, "degrees of tilt"), value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
     element_tilt_deg: Vec<f64>,
     /// Where to write the station.toml.
     #[arg(long)]

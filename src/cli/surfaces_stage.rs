@@ -11,13 +11,13 @@ use mfd::solve::surfaces::SurfaceOptions;
 pub struct SurfaceArgs {
     /// Zernike terms per surface (Noll 1..=N, up to 231); default: chosen
     /// by the Bayesian information criterion up to --max-terms.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::int_range(1usize, 231, "Noll terms the surfaces support"))]
     pub terms: Option<usize>,
     /// Largest model the term choice considers.
-    #[arg(long, default_value_t = 66)]
+    #[arg(long, value_parser = super::check::int_range(1usize, 231, "Noll terms the surfaces support"), default_value_t = 66)]
     pub max_terms: usize,
     /// Levenberg–Marquardt iteration limit per stage.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 30)]
     pub max_iter: usize,
     /// Skip the joint refinement of front and back on S1 and S2 together.
     #[arg(long)]
@@ -34,7 +34,7 @@ pub struct SurfaceArgs {
     /// Report a surface as not reconstructed (with the reason) when its
     /// expected RMS error exceeds this, nm; without it, only when the
     /// expected error is as large as the fitted surface.
-    #[arg(long)]
+    #[arg(long, value_parser = super::check::positive)]
     pub max_expected_nm: Option<f64>,
 }
 

@@ -29,7 +29,7 @@ pub struct TraceArgs {
     out: PathBuf,
     /// Distance of the element's physical rim beyond the aperture radius, mm:
     /// paths touching a surface beyond it are lost.
-    #[arg(long, default_value_t = DEFAULT_EDGE_MARGIN_MM)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = DEFAULT_EDGE_MARGIN_MM)]
     edge_margin_mm: f64,
 }
 

@@ -33,16 +33,16 @@ pub struct TradeoffArgs {
     #[arg(long)]
     station: Option<PathBuf>,
     /// Frames per direction (τ from 0.5 in steps of 0.5: τ_stop = 0.5 N).
-    #[arg(long, value_delimiter = ',', default_value = "50,100,200,400")]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, value_delimiter = ',', default_value = "50,100,200,400")]
     frames: Vec<usize>,
     /// Zernike terms per surface.
-    #[arg(long, value_delimiter = ',', default_value = "15,36,66")]
+    #[arg(long, value_parser = super::check::int_range(1usize, 231, "Noll terms the surfaces support"), value_delimiter = ',', default_value = "15,36,66")]
     terms: Vec<usize>,
     /// Iteration limits (spectral and surface Levenberg–Marquardt alike).
-    #[arg(long, value_delimiter = ',', default_value = "3,30")]
+    #[arg(long, value_parser = super::check::positive_int::<usize>, value_delimiter = ',', default_value = "3,30")]
     max_iter: Vec<usize>,
     /// Read noise, fraction of full scale.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, value_parser = super::check::non_negative, default_value_t = 0.02)]
     noise: f64,
     /// Seed of the surfaces (36 terms, 60 nm RMS) and the noise.
     #[arg(long, default_value_t = 5)]

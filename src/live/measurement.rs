@@ -8,11 +8,11 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use super::SolverSink;
 use super::{
     acquire_observed, Counters, FrameSink, LiveError, LiveTap, Recorder, Report, SequencerConfig,
     Session,
 };
+use super::{Mismatch, RecordingSetup, SolverSink};
 use crate::acquire::acquisition::{Acquisition, AcquisitionError, FrameInfo};
 use crate::acquire::camera::{Camera, CameraConfig, CameraError, TriggerMode};
 use crate::acquire::display::PatternDisplay;
@@ -50,6 +50,21 @@ pub enum MeasurementError {
     /// The streaming solver could not be set up or fed.
     #[error(transparent)]
     Spectral(#[from] SpectralError),
+    /// `--resume` was given other settings than the acquisition was begun
+    /// with: nothing is appended.
+    #[error(
+        "{dir}: cannot resume: it was begun with other settings ({}); nothing was \
+         appended. Start anew: in a new --out folder, or without --resume (with \
+         --overwrite to replace this one)",
+        mismatches.iter().map(|m| format!("{}: held {}, given {}", m.what, m.held, m.given))
+            .collect::<Vec<_>>().join("; ")
+    )]
+    ResumeMismatch {
+        /// The acquisition folder.
+        dir: String,
+        /// Every setting that differs.
+        mismatches: Vec<Mismatch>,
+    },
     /// The run stopped on an error; `recorded` frames are on disk.
     #[error(
         "{source}; {recorded} of {total} frames are recorded in {dir} (continue with --resume)"
@@ -79,6 +94,46 @@ pub enum Start {
     Resume,
 }
 
+/// What a measurement records, and where: [`Measurement::prepare_checked`]'s
+/// inputs besides the devices.
+#[derive(Debug, Clone)]
+pub struct Prepared<'s> {
+    /// The station.
+    pub station: &'s Station,
+    /// SHA-256 (hex) of the station file's bytes.
+    pub station_sha256: &'s str,
+    /// The schedule, in display order.
+    pub patterns: Vec<Pattern>,
+    /// The camera's settings.
+    pub camera_config: CameraConfig,
+    /// The acquisition folder.
+    pub dir: &'s Path,
+    /// New or resumed.
+    pub start: Start,
+}
+
+/// Refuses to resume the acquisition in `dir` with a setup other than the
+/// one it was begun with. One begun before `recording.toml` existed is
+/// resumed with a warning (only its recorded patterns are checked then).
+fn check_resume(dir: &Path, given: &RecordingSetup) -> Result<(), MeasurementError> {
+    let Some(held) = RecordingSetup::read(dir)? else {
+        log::warn!(
+            "{}: no {}: only the recorded frames' patterns can be checked on resume",
+            dir.display(),
+            super::RECORDING_FILE
+        );
+        return Ok(());
+    };
+    let mismatches = held.mismatches(given);
+    if mismatches.is_empty() {
+        return Ok(());
+    }
+    Err(MeasurementError::ResumeMismatch {
+        dir: dir.display().to_string(),
+        mismatches,
+    })
+}
+
 /// A measurement ready to run.
 pub struct Measurement<'a> {
     camera: Box<dyn Camera>,
@@ -93,18 +148,17 @@ pub struct Measurement<'a> {
 }
 
 impl<'a> Measurement<'a> {
-    /// Configures `camera` with `camera_config` (the trigger chosen from
-    /// what it supports), checks its frame size against the station, starts
-    /// or resumes the acquisition in `dir`, and (with `solver`) sets up the
-    /// streaming spectral solver and feeds it the frames already recorded.
+    /// [`Measurement::prepare_checked`] for a station known only as
+    /// loaded: its digest is that of its canonical text (the copy the
+    /// acquisition holds).
     ///
     /// # Errors
-    /// [`MeasurementError`] naming what refused.
+    /// As [`Measurement::prepare_checked`].
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(
         station: &Station,
         patterns: Vec<Pattern>,
-        mut camera: Box<dyn Camera>,
+        camera: Box<dyn Camera>,
         display: Box<dyn PatternDisplay + 'a>,
         camera_config: CameraConfig,
         dir: &Path,
@@ -112,7 +166,49 @@ impl<'a> Measurement<'a> {
         solver: Option<SpectralConfig>,
         config: SequencerConfig,
     ) -> Result<Self, MeasurementError> {
+        let digest = super::sha256_hex(station.to_toml_string().as_bytes());
+        let prepared = Prepared {
+            station,
+            station_sha256: &digest,
+            patterns,
+            camera_config,
+            dir,
+            start,
+        };
+        Self::prepare_checked(prepared, camera, display, solver, config)
+    }
+
+    /// Configures `camera` with the camera settings (the trigger chosen
+    /// from what it supports), checks its frame size against the station,
+    /// starts or resumes the acquisition in `dir`, and (with `solver`) sets
+    /// up the streaming spectral solver and feeds it the frames already
+    /// recorded. A new acquisition keeps its setup (schedule, station
+    /// digest, camera and settings) in `recording.toml`; a resumed one must
+    /// match it in every setting.
+    ///
+    /// # Errors
+    /// [`MeasurementError::ResumeMismatch`] naming every setting that
+    /// differs on resume; [`MeasurementError`] naming what refused.
+    pub fn prepare_checked(
+        prepared: Prepared<'_>,
+        mut camera: Box<dyn Camera>,
+        display: Box<dyn PatternDisplay + 'a>,
+        solver: Option<SpectralConfig>,
+        config: SequencerConfig,
+    ) -> Result<Self, MeasurementError> {
+        let Prepared {
+            station,
+            station_sha256,
+            patterns,
+            camera_config,
+            dir,
+            start,
+        } = prepared;
         let info = camera.describe();
+        let setup = RecordingSetup::new(station_sha256, &info, &camera_config, &patterns);
+        if start == Start::Resume {
+            check_resume(dir, &setup)?;
+        }
         let trigger = if info.software_trigger {
             TriggerMode::Software
         } else {
@@ -135,7 +231,11 @@ impl<'a> Measurement<'a> {
         }
         let recorder = match start {
             Start::Resume => Recorder::resume(dir, &patterns)?,
-            Start::New { overwrite } => Recorder::create(dir, station, &patterns, overwrite)?,
+            Start::New { overwrite } => {
+                let recorder = Recorder::create(dir, station, &patterns, overwrite)?;
+                setup.write(dir)?;
+                recorder
+            }
         };
         let solver = solver
             .map(|c| start_solver(station, &patterns, dir, recorder.recorded(), c))

@@ -24,14 +24,16 @@
 mod measurement;
 mod recorder;
 mod sequencer;
+mod setup;
 mod sinks;
 mod tap;
 
 use std::time::Duration;
 
-pub use measurement::{Measurement, MeasurementError, Start};
+pub use measurement::{Measurement, MeasurementError, Prepared, Start};
 pub use recorder::Recorder;
 pub use sequencer::{acquire, acquire_observed, Session};
+pub use setup::{sha256_hex, Mismatch, RecordingSetup, RECORDING_FILE, RECORDING_FORMAT};
 pub use sinks::{FrameSink, SinkError, SolverSink};
 pub use tap::{LiveTap, SharedFrame};
 

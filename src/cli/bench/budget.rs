@@ -20,10 +20,10 @@ pub struct BudgetBenchArgs {
     #[arg(long, default_value = "calib/paper-sim.toml")]
     station: PathBuf,
     /// Zernike terms of the truth and of the fit.
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 150)]
     terms: usize,
     /// σ of S1 and S2 per coordinate, screen px (as `bench surfaces`).
-    #[arg(long, num_args = 2, default_values_t = [0.110, 0.121])]
+    #[arg(long, value_parser = crate::cli::check::positive, num_args = 2, default_values_t = [0.110, 0.121])]
     sigma_px: Vec<f64>,
     /// Seed of the truth surfaces and of the noise.
     #[arg(long, default_value_t = 7)]

@@ -28,16 +28,16 @@ pub struct ConsoleBenchArgs {
     #[arg(long, default_value = "calib/bench-fill.toml")]
     station: PathBuf,
     /// Largest τ of the schedule (τ = 1, 2, …; 2 directions × 3 phases each).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<u32>, default_value_t = 10)]
     tau_stop: u32,
     /// Screen settle time after each pattern, ms.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, value_parser = crate::cli::check::range(0.0, 10_000.0, "ms a display takes to settle"), default_value_t = 5.0)]
     settle_ms: f64,
     /// The slow client's time to "draw" a preview before asking for the next, ms.
     #[arg(long, default_value_t = 500)]
     draw_ms: u64,
     /// Bytes it reads at a time from a preview response.
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 4096)]
     chunk_bytes: usize,
     /// Its pause after each chunk, ms.
     #[arg(long, default_value_t = 2)]

@@ -21,7 +21,7 @@ use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertaint
 #[derive(Args)]
 pub struct ExtremesArgs {
     /// σ of the screen points in the noisy runs, px per coordinate.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, value_parser = crate::cli::check::positive, default_value_t = 0.1)]
     sigma_px: f64,
     /// Seed of the surfaces and the noise.
     #[arg(long, default_value_t = 3)]

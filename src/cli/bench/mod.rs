@@ -81,7 +81,7 @@ struct SpectralBenchArgs {
     #[arg(long, default_value_t = 20_000)]
     pixels: usize,
     /// Read noise as a fraction of full scale.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, value_parser = crate::cli::check::non_negative, default_value_t = 0.05)]
     noise: f64,
     /// How the solver keeps the pixels' data: auto, series or statistics.
     #[arg(long, value_enum, default_value_t = mfd::solve::spectral::Engine::Statistics, hide_possible_values = true)]
@@ -106,7 +106,7 @@ struct RenderArgs {
     #[arg(long, default_value = "calib/bench-fill.toml")]
     station: PathBuf,
     /// Frames to render per measurement.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 100)]
     frames: usize,
 }
 

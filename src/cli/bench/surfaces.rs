@@ -24,15 +24,15 @@ pub struct SurfaceBenchArgs {
     #[arg(long, default_value = "calib/paper-sim.toml")]
     station: PathBuf,
     /// Zernike terms of the truth and of the fit.
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 150)]
     terms: usize,
     /// σ of S1 per coordinate, screen px. The default is what the spectral
     /// solver achieved on this station (2000 frames, 12 bit, 5 % noise):
     /// RMS error 0.110 px for S1 (docs/figures.md); 0 for noise-free.
-    #[arg(long, default_value_t = 0.110)]
+    #[arg(long, value_parser = crate::cli::check::positive, default_value_t = 0.110)]
     sigma1_px: f64,
     /// σ of S2 per coordinate, screen px (measured there: 0.121 px).
-    #[arg(long, default_value_t = 0.121)]
+    #[arg(long, value_parser = crate::cli::check::positive, default_value_t = 0.121)]
     sigma2_px: f64,
     /// Seed of the truth surfaces and of the noise.
     #[arg(long, default_value_t = 7)]

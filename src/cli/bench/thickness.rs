@@ -15,13 +15,13 @@ use mfd::solve::spectral::{PixelFlags, SpectralConfig, SpectralSolver};
 #[derive(Args)]
 pub struct TableArgs {
     /// Plate thicknesses, mm.
-    #[arg(long, value_delimiter = ',', default_values_t = [1.0, 2.0, 3.0, 5.0, 10.0, 30.0])]
+    #[arg(long, value_parser = crate::cli::check::positive, value_delimiter = ',', default_values_t = [1.0, 2.0, 3.0, 5.0, 10.0, 30.0])]
     thickness_mm: Vec<f64>,
     /// Refractive indices.
-    #[arg(long, value_delimiter = ',', default_values_t = [1.46, 1.5, 2.2])]
+    #[arg(long, value_parser = crate::cli::check::refractive_index, value_delimiter = ',', default_values_t = [1.46, 1.5, 2.2])]
     index: Vec<f64>,
     /// Read noise, fraction of full scale.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, value_parser = crate::cli::check::non_negative, default_value_t = 0.05)]
     noise: f64,
     /// Spectral engine: auto, series or statistics.
     #[arg(long, value_enum, default_value_t = mfd::solve::spectral::Engine::Auto, hide_possible_values = true)]

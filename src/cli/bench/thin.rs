@@ -27,19 +27,19 @@ use super::{print_json, round};
 #[derive(Args)]
 pub struct ThinArgs {
     /// Plate thicknesses, mm.
-    #[arg(long, value_delimiter = ',', default_values_t = [1.0, 2.0, 3.0, 5.0, 10.0, 30.0])]
+    #[arg(long, value_parser = crate::cli::check::positive, value_delimiter = ',', default_values_t = [1.0, 2.0, 3.0, 5.0, 10.0, 30.0])]
     thickness_mm: Vec<f64>,
     /// Refractive indices.
-    #[arg(long, value_delimiter = ',', default_values_t = [1.46, 1.5, 2.2])]
+    #[arg(long, value_parser = crate::cli::check::refractive_index, value_delimiter = ',', default_values_t = [1.46, 1.5, 2.2])]
     index: Vec<f64>,
     /// Read noise, fraction of full scale (0: noise-free).
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, value_parser = crate::cli::check::non_negative, default_value_t = 0.05)]
     noise: f64,
     /// Terms of the true surfaces (Noll 1…N; 4…N at 60 nm RMS, tilts 100 nm).
-    #[arg(long, default_value_t = 15)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 15)]
     truth_terms: usize,
     /// Terms fitted; default: the estimators choose (BIC).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>)]
     terms: Option<usize>,
     /// Seeds of the noise (one acquisition each).
     #[arg(long, value_delimiter = ',', default_values_t = [5])]
