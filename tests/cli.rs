@@ -86,7 +86,8 @@ fn bad_station_names_file_and_field() {
         "--out",
         dir.path().to_str().unwrap(),
     ]);
-    assert_eq!(out.status.code(), Some(1));
+    // 3: an input file that is not valid (src/cli/exit.rs).
+    assert_eq!(out.status.code(), Some(3));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("bad.toml") && err.contains("element.thickness_mm"),

@@ -18,7 +18,6 @@ pub enum Class {
     NoSignal,
     /// The result contradicts the station (flagged, `--accept-inconsistent`
     /// to exit 0 anyway).
-    #[allow(dead_code)] // until the station-consistency check (issue 19, case 5) reports it
     Inconsistent,
     /// Camera or display failure.
     Device,

@@ -113,11 +113,11 @@ pub struct CheckArgs {
     /// points displaced from the station's flat-plate prediction by more
     /// than such surfaces (and the station's tolerance) explain flag the
     /// result as inconsistent, and single pixels as far from the station.
-    #[arg(long, default_value_t = mfd::pipeline::DEFAULT_MAX_DEPARTURE_NM, value_parser = positive_f64)]
+    #[arg(long, default_value_t = mfd::pipeline::DEFAULT_MAX_DEPARTURE_NM, value_parser = check::positive)]
     pub max_departure_nm: f64,
     /// The station's own share of that spread (calibration, the element's
     /// placement), screen px.
-    #[arg(long, default_value_t = 3.0, value_parser = non_negative_f64)]
+    #[arg(long, default_value_t = 3.0, value_parser = check::non_negative)]
     pub station_spread_px: f64,
     /// Exit 0 even when the screen points contradict the station (the
     /// result is still flagged in consistency.json and summary.json).
@@ -133,22 +133,6 @@ impl CheckArgs {
             station_spread_px: self.station_spread_px,
         }
     }
-}
-
-/// A finite number > 0.
-fn positive_f64(s: &str) -> Result<f64, String> {
-    let x: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    (x.is_finite() && x > 0.0)
-        .then_some(x)
-        .ok_or_else(|| format!("{s}: needs a finite number > 0"))
-}
-
-/// A finite number ≥ 0.
-fn non_negative_f64(s: &str) -> Result<f64, String> {
-    let x: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    (x.is_finite() && x >= 0.0)
-        .then_some(x)
-        .ok_or_else(|| format!("{s}: needs a finite number ≥ 0"))
 }
 
 /// The pattern schedule flags, shared by every command that shows patterns.
