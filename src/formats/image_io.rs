@@ -82,6 +82,12 @@ pub fn read_gray(path: &Path) -> Result<GrayImage, ImageError> {
     }
 }
 
+/// The largest frame a reader decodes, bytes: the largest sensor a station
+/// may have (2^26 pixels, `optics::station`'s validation) at 16 bits. The
+/// decoders refuse a header announcing more before allocating it (PNG's
+/// own default, 64 MiB, would refuse 16-bit frames above 33 Mpx).
+const MAX_FRAME_BYTES: usize = 2 << 26;
+
 fn open(path: &Path) -> Result<BufReader<File>, ImageError> {
     File::open(path)
         .map(BufReader::new)
@@ -92,7 +98,10 @@ fn open(path: &Path) -> Result<BufReader<File>, ImageError> {
 }
 
 fn read_png(path: &Path) -> Result<GrayImage, ImageError> {
-    let mut reader = png::Decoder::new(open(path)?)
+    let limits = png::Limits {
+        bytes: MAX_FRAME_BYTES,
+    };
+    let mut reader = png::Decoder::new_with_limits(open(path)?, limits)
         .read_info()
         .map_err(|e| decode_err(path, e))?;
     let info = reader.info();
@@ -135,7 +144,11 @@ fn read_png(path: &Path) -> Result<GrayImage, ImageError> {
 }
 
 fn read_tiff(path: &Path) -> Result<GrayImage, ImageError> {
-    let mut dec = tiff::decoder::Decoder::new(open(path)?).map_err(|e| decode_err(path, e))?;
+    let mut limits = tiff::decoder::Limits::default();
+    limits.decoding_buffer_size = MAX_FRAME_BYTES;
+    let mut dec = tiff::decoder::Decoder::new(open(path)?)
+        .map_err(|e| decode_err(path, e))?
+        .with_limits(limits);
     let (width, height) = dec.dimensions().map_err(|e| decode_err(path, e))?;
     let color = dec.colortype().map_err(|e| decode_err(path, e))?;
     let not_gray = |found: String| ImageError::NotGray {
@@ -151,6 +164,12 @@ fn read_tiff(path: &Path) -> Result<GrayImage, ImageError> {
         tiff::decoder::DecodingResult::U16(v) => (v, 16),
         _ => return Err(not_gray("a non-integer sample type".into())),
     };
+    if data.len() as u64 != u64::from(width) * u64::from(height) {
+        return Err(decode_err(
+            path,
+            format!("{} samples for {width}x{height} pixels", data.len()),
+        ));
+    }
     Ok(GrayImage {
         width,
         height,
