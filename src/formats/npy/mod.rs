@@ -426,6 +426,10 @@ mod tests {
         std::fs::write(&p, header_bytes("<u2", &[1 << 32, 1 << 32, 1 << 32])).unwrap();
         let err = NpyStackReader::open(&p).unwrap_err().to_string();
         assert!(err.contains("more elements"), "{err}");
+        // fuzz_readers: 0 frames of 2^40 × 2^40 pixels overflowed the frame size.
+        std::fs::write(&p, header_bytes("<u2", &[0, 1 << 40, 1 << 40])).unwrap();
+        let err = NpyStackReader::open(&p).unwrap_err().to_string();
+        assert!(err.contains("more elements"), "{err}");
         std::fs::write(&p, header_bytes("<u2", &[3, 0, 4])).unwrap();
         assert!(NpyStackReader::open(&p).is_err());
         let mut h = header_bytes("<f8", &[1]);

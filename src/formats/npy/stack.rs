@@ -144,6 +144,8 @@ impl NpyStackReader {
         let file = File::open(path).map_err(io_err(path))?;
         let len = file.metadata().map_err(io_err(path))?.len();
         checked_len(path, &[frames, rows, cols, dtype.size()])?;
+        // A stack of 0 frames passes the line above with any frame size.
+        let frame_len = checked_len(path, &[rows, cols, dtype.size()])?;
         if rows == 0 || cols == 0 {
             return Err(NpyError::Unexpected {
                 path: path.to_path_buf(),
@@ -151,8 +153,7 @@ impl NpyStackReader {
                 found: format!("shape {:?}", h.shape),
             });
         }
-        // No overflow: frames · rows · cols · size fits (checked above).
-        let frame_bytes = (rows * cols * dtype.size()) as u64;
+        let frame_bytes = frame_len as u64;
         let complete = len
             .saturating_sub(h.data_offset)
             .checked_div(frame_bytes)
