@@ -8,11 +8,13 @@
 //! would abort the whole test binary), no hang (each call runs on its own
 //! thread and must return within [`CALL_LIMIT`]).
 //!
-//! Budget: [`CASES`] inputs per reader (override with `MFD_FUZZ_CASES`),
-//! seeded, so a run is repeatable. Nine readers × 400 cases took 12 s in
-//! the test profile on the 2-core CI machine (the whole file stays under
-//! 60 s). A failure prints the shrunk input; it then becomes a unit test
-//! beside its reader.
+//! Budget: [`CASES`] inputs per base file (override with `MFD_FUZZ_CASES`),
+//! seeded, so a run is repeatable: 19 base files × 1 500 = 28 500 inputs,
+//! 11 s of CPU and 25 s wall in the test profile on the 2-core CI machine
+//! under a load of 5 (the whole file stays under 60 s). Longer runs were
+//! clean: 4 000 per base (76 000 inputs), 20 000 per base for all but the
+//! profiles (340 000). A failure prints the shrunk input; it then becomes a
+//! unit test beside its reader.
 
 mod common;
 
@@ -31,8 +33,8 @@ use mfd::formats::npy::{self, NpyStackReader, NpyStackWriter, StackDtype};
 use mfd::formats::surfaces_file::SurfacesFile;
 use mfd::optics::station::{Station, StationUncertainty};
 
-/// Inputs per reader. 400 keeps the file well under a minute (see the head).
-const CASES: u32 = 4000;
+/// Inputs per base file: keeps the file well under a minute (see the head).
+const CASES: u32 = 1500;
 
 /// The longest one reader call may take before it counts as a hang. The
 /// slowest reader here (a station v2 with distortion, 18×18 Newton solves)
@@ -789,6 +791,31 @@ fn calibration_sessions() {
             write(dir.path(), &input);
             if let Ok(s) = Session::load(dir.path()) {
                 let _ = s.centroids();
+            }
+        })
+    });
+}
+
+#[test]
+fn hardware_profiles() {
+    use mfd::optics::station::{CameraProfile, DisplayProfile};
+    let camera = read(&common::repo("hw/camera/baumer-txg12.toml"));
+    fuzz(80, camera, Kind::Text, |input| {
+        bounded("CameraProfile::load", move || {
+            let dir = case_dir();
+            let path = dir.path().join("c.toml");
+            std::fs::write(&path, input).unwrap();
+            let _ = CameraProfile::load(&path);
+        })
+    });
+    let display = read(&common::repo("hw/display/mtiph-e2m21gm.toml"));
+    fuzz(81, display, Kind::Text, |input| {
+        bounded("DisplayProfile::load", move || {
+            let dir = case_dir();
+            let path = dir.path().join("d.toml");
+            std::fs::write(&path, input).unwrap();
+            if let Ok(d) = DisplayProfile::load(&path) {
+                let _ = mfd::acquire::display::offscreen::settle_time(&d);
             }
         })
     });

@@ -156,3 +156,43 @@ fn simulate_refuses_a_schedule_too_long_or_beyond_the_screen() {
     std::fs::remove_file(&schedule).ok();
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// Hardware profiles (`hw/`): numbers a station is built from, checked
+/// where they are read (a NaN settle time or gamma, a 64-bit ADC ran on).
+#[test]
+fn hardware_profiles_are_checked_where_read() {
+    use mfd::optics::station::{CameraProfile, DisplayProfile};
+    let dir = std::env::temp_dir().join(format!("mfd-input-ranges-hw-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let display = std::fs::read_to_string(common::repo("hw/display/mtiph-e2m21gm.toml")).unwrap();
+    let camera = std::fs::read_to_string(common::repo("hw/camera/baumer-txg12.toml")).unwrap();
+    let path = dir.join("p.toml");
+    for (from, to, field) in [
+        ("gamma = 2.2", "gamma = nan", "gamma"),
+        ("settle_ms = 30.0", "settle_ms = -1.0", "settle_ms"),
+        ("diagonal_in = 21.3", "diagonal_in = 0.0", "diagonal_in"),
+    ] {
+        assert!(display.contains(from), "{from}");
+        std::fs::write(&path, display.replacen(from, to, 1)).unwrap();
+        let err = DisplayProfile::load(&path).unwrap_err().to_string();
+        assert!(err.contains(field), "{to}: {err}");
+    }
+    for (from, to, field) in [
+        ("bit_depth = 12", "bit_depth = 64", "bit_depth"),
+        (
+            "pixel_pitch_um = 3.75",
+            "pixel_pitch_um = -3.75",
+            "pixel_pitch_um",
+        ),
+    ] {
+        assert!(camera.contains(from), "{from}");
+        std::fs::write(&path, camera.replacen(from, to, 1)).unwrap();
+        let err = CameraProfile::load(&path).unwrap_err().to_string();
+        assert!(err.contains(field), "{to}: {err}");
+    }
+    std::fs::write(&path, &display).unwrap();
+    assert!(DisplayProfile::load(&path).is_ok());
+    std::fs::write(&path, &camera).unwrap();
+    assert!(CameraProfile::load(&path).is_ok());
+    std::fs::remove_dir_all(&dir).ok();
+}
