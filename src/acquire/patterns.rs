@@ -172,7 +172,7 @@ impl Schedule {
         // is 1e12 values, which `taus()` must never be asked to allocate.
         let per_direction = self.tau_count();
         let frames = per_direction * (self.directions_deg.len() * self.phases_rad.len()) as f64;
-        if !(frames <= MAX_FRAMES as f64) {
+        if frames.is_nan() || frames > MAX_FRAMES as f64 {
             return bad(
                 "tau-step",
                 format!(
@@ -255,8 +255,7 @@ pub fn first_beyond_screen(
         .enumerate()
         .find_map(|(index, (direction_deg, tau))| {
             let max = FringeAxis::new(direction_deg, width, height).max_tau();
-            // `!(τ ≤ max)` also catches a NaN τ.
-            (!(tau <= max)).then(|| {
+            (tau.is_nan() || tau > max).then(|| {
                 (
                     index,
                     format!(

@@ -242,7 +242,7 @@ fn read_all(path: &Path, descr: &str, elem: usize) -> Result<(Vec<usize>, Vec<u8
         .map_err(io_err(path))?
         .len()
         .saturating_sub(h.data_offset);
-    let needed = (n as u64).checked_mul(elem as u64).unwrap_or(u64::MAX);
+    let needed = (n as u64).saturating_mul(elem as u64);
     if available < needed {
         return Err(NpyError::Truncated {
             path: path.to_path_buf(),
