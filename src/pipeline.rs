@@ -333,6 +333,7 @@ pub fn reconstruct(
     let owned;
     let (first, solver): (First, Option<&SpectralSolver>) = match input {
         Input::Acquisition(acq) => {
+            crate::acquire::acquisition::check_against_station(acq, station)?;
             let t0 = Instant::now();
             acq.check_resolution(station.camera.width, station.camera.height)?;
             let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;

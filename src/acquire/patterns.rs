@@ -9,6 +9,14 @@
 
 use std::f64::consts::TAU;
 
+/// The most frames one schedule, schedule file or acquisition may hold.
+/// The paper's schedule is 2 000 frames; 100 000 is 50 times that, 28
+/// minutes of patterns at a display's 60 Hz, and a 250 GB stack of
+/// 1296×966 16-bit frames: beyond it a schedule is a typing error (a step
+/// of 0.001 for 0.1), not a measurement, and expanding it would exhaust
+/// memory before anything is shown.
+pub const MAX_FRAMES: usize = 100_000;
+
 /// Errors in a pattern schedule.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ScheduleError {
@@ -74,6 +82,16 @@ impl FringeAxis {
     #[inline]
     pub fn s(&self, u: f64, v: f64) -> f64 {
         (u * self.cos + v * self.sin - self.s0) * self.inv_l
+    }
+
+    /// The largest τ this screen can show in this direction: the display's
+    /// Nyquist limit. Pixel centres sample the fringe; one period spans
+    /// `L / τ` screen pixels along the fringe direction (`s` runs over
+    /// `[0, 1]` across `L` px), and a period needs at least 2 pixels to be
+    /// shown as a fringe rather than an alias of a coarser one:
+    /// `L / τ ≥ 2`, so `τ ≤ L / 2`.
+    pub fn max_tau(&self) -> f64 {
+        self.length_px / 2.0
     }
 
     /// Gradient `(∂s/∂u, ∂s/∂v)`, per screen pixel.
@@ -150,13 +168,49 @@ impl Schedule {
                 format!("expected finite phases, found {:?}", self.phases_rad),
             );
         }
-        if self.taus().len() > 1_000_000 {
+        // Counted before anything is expanded: τ up to 1e9 in steps of 0.001
+        // is 1e12 values, which `taus()` must never be asked to allocate.
+        let per_direction = self.tau_count();
+        let frames = per_direction * (self.directions_deg.len() * self.phases_rad.len()) as f64;
+        if frames.is_nan() || frames > MAX_FRAMES as f64 {
             return bad(
                 "tau-step",
-                "more than a million τ values per direction".into(),
+                format!(
+                    "{frames:.0} frames ({per_direction:.0} τ values × {} directions × {} \
+                     phases): above the {MAX_FRAMES} frames a schedule may have",
+                    self.directions_deg.len(),
+                    self.phases_rad.len()
+                ),
             );
         }
         Ok(())
+    }
+
+    /// How many τ values [`Schedule::taus`] gives, as a float so that no
+    /// schedule overflows the count.
+    fn tau_count(&self) -> f64 {
+        ((self.tau_stop - self.tau_start) / self.tau_step + 1e-9).floor() + 1.0
+    }
+
+    /// Checks that a `width × height` screen can show every τ of the
+    /// schedule in every direction ([`FringeAxis::max_tau`]). Call after
+    /// [`Schedule::validate`].
+    ///
+    /// # Errors
+    /// [`ScheduleError::Invalid`] naming `tau-stop`, the direction and the limit.
+    pub fn check_against_screen(&self, width: u32, height: u32) -> Result<(), ScheduleError> {
+        let last = self.tau_start + (self.tau_count() - 1.0).max(0.0) * self.tau_step;
+        match first_beyond_screen(
+            self.directions_deg.iter().map(|&d| (d, last)),
+            width,
+            height,
+        ) {
+            None => Ok(()),
+            Some((_, problem)) => Err(ScheduleError::Invalid {
+                field: "tau-stop",
+                problem,
+            }),
+        }
     }
 
     /// The τ values, computed as `start + k·step` (no accumulated rounding);
@@ -186,6 +240,33 @@ impl Schedule {
         }
         out
     }
+}
+
+/// The first `(direction_deg, tau)` of `patterns` that a `width × height`
+/// screen cannot show ([`FringeAxis::max_tau`]): its index and what is
+/// wrong, in words that name the value and the allowed range.
+pub fn first_beyond_screen(
+    patterns: impl IntoIterator<Item = (f64, f64)>,
+    width: u32,
+    height: u32,
+) -> Option<(usize, String)> {
+    patterns
+        .into_iter()
+        .enumerate()
+        .find_map(|(index, (direction_deg, tau))| {
+            let max = FringeAxis::new(direction_deg, width, height).max_tau();
+            (tau.is_nan() || tau > max).then(|| {
+                (
+                    index,
+                    format!(
+                        "τ = {tau} is above the {max:.2} a {width}x{height} px screen can show \
+                         at {direction_deg}° (a fringe period needs ≥ 2 screen pixels: τ ≤ L/2, \
+                         L = {:.1} px across the screen along the fringe direction)",
+                        2.0 * max
+                    ),
+                )
+            })
+        })
 }
 
 #[cfg(test)]
@@ -220,6 +301,49 @@ mod tests {
         // +45°: L = (W + H)/√2 (closed form).
         let a = FringeAxis::new(45.0, 1600, 1200);
         assert!((a.length_px - 2800.0 / 2f64.sqrt()).abs() < 1e-9);
+    }
+
+    /// Issue 19: τ up to 1e9 in steps of 0.001 aborted out of memory in
+    /// `mfd simulate` (1e12 τ values expanded before any check).
+    #[test]
+    fn a_schedule_of_a_trillion_frames_is_refused_before_expansion() {
+        let s = Schedule {
+            tau_stop: 1e9,
+            tau_step: 0.001,
+            ..Schedule::default()
+        };
+        let err = s.validate().unwrap_err().to_string();
+        assert!(err.contains("tau-step") && err.contains("100000"), "{err}");
+        // The limit itself is allowed: 2 directions × 50 000 τ.
+        let s = Schedule {
+            tau_start: 1.0,
+            tau_stop: 50_000.0,
+            tau_step: 1.0,
+            ..Schedule::default()
+        };
+        assert_eq!(s.validate(), Ok(()));
+    }
+
+    #[test]
+    fn nyquist_limit_of_the_screen() {
+        // +45° on 1600×1200: L = 2800/√2 = 1979.9 px, τ ≤ L/2 = 989.95.
+        let a = FringeAxis::new(45.0, 1600, 1200);
+        assert!((a.max_tau() - 1400.0 / 2f64.sqrt()).abs() < 1e-9);
+        // 0°: L = W = 1600 px, τ ≤ 800.
+        assert_eq!(FringeAxis::new(0.0, 1600, 1200).max_tau(), 800.0);
+        let ok = Schedule::default();
+        assert_eq!(ok.check_against_screen(1600, 1200), Ok(()));
+        let s = Schedule {
+            tau_stop: 1000.0,
+            ..Schedule::default()
+        };
+        let err = s.check_against_screen(1600, 1200).unwrap_err().to_string();
+        assert!(err.contains("tau-stop") && err.contains("989.95"), "{err}");
+        assert_eq!(
+            first_beyond_screen([(0.0, 800.0), (0.0, 800.5)], 1600, 1200).map(|e| e.0),
+            Some(1)
+        );
+        assert!(first_beyond_screen([(0.0, f64::NAN)], 1600, 1200).is_some());
     }
 
     #[test]

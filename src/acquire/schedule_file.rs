@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::acquire::acquisition::FrameInfo;
-use crate::acquire::patterns::Pattern;
+use crate::acquire::patterns::{first_beyond_screen, Pattern, MAX_FRAMES};
 
 /// The format tag of a schedule file.
 pub const SCHEDULE_FORMAT: &str = "mfd-schedule/1";
@@ -134,6 +134,15 @@ impl ScheduleFile {
                 "no [[frame]] table: a schedule needs frames".into(),
             ));
         }
+        if self.frame.len() > MAX_FRAMES {
+            return Err(bad(
+                "frame".into(),
+                format!(
+                    "{} [[frame]] tables: above the {MAX_FRAMES} frames a schedule may have",
+                    self.frame.len()
+                ),
+            ));
+        }
         for (index, f) in self.frame.iter().enumerate() {
             for (name, v, ok) in [
                 (
@@ -158,6 +167,30 @@ impl ScheduleFile {
             }
         }
         Ok(())
+    }
+}
+
+impl ScheduleFile {
+    /// Checks that a `width × height` screen can show every frame's τ
+    /// (the display's Nyquist limit, [`crate::acquire::patterns::FringeAxis::max_tau`]).
+    ///
+    /// # Errors
+    /// [`ScheduleFileError::Invalid`] naming `path`, `frame[k].tau` and the limit.
+    pub fn check_against_screen(
+        &self,
+        path: &Path,
+        width: u32,
+        height: u32,
+    ) -> Result<(), ScheduleFileError> {
+        let frames = self.frame.iter().map(|f| (f.direction_deg, f.tau));
+        match first_beyond_screen(frames, width, height) {
+            None => Ok(()),
+            Some((index, problem)) => Err(ScheduleFileError::Invalid {
+                path: path.to_path_buf(),
+                field: format!("frame[{index}].tau"),
+                problem,
+            }),
+        }
     }
 }
 
@@ -232,6 +265,31 @@ mod tests {
         // Floats are written in their shortest round-trip form: bit-exact.
         assert_eq!(back, frames());
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn tau_beyond_the_screen_names_the_frame() {
+        let file = ScheduleFile::from_frames(&frames());
+        let path = Path::new("s.toml");
+        assert!(file.check_against_screen(path, 1600, 1200).is_ok());
+        // Frame 1 is τ = 97.3 at −45°: a 100×100 screen shows τ ≤ 100·√2/2 = 70.7.
+        let err = file.check_against_screen(path, 100, 100).unwrap_err();
+        let err = err.to_string();
+        assert!(
+            err.contains("frame[1].tau") && err.contains("70.71"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn more_frames_than_a_schedule_may_have_are_refused() {
+        let one = frames()[0];
+        let many = vec![one; MAX_FRAMES + 1];
+        let err = ScheduleFile::from_frames(&many)
+            .validate(Path::new("s.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("100000"), "{err}");
     }
 
     #[test]

@@ -82,6 +82,12 @@ pub fn read_gray(path: &Path) -> Result<GrayImage, ImageError> {
     }
 }
 
+/// The largest frame a reader decodes, bytes: the largest sensor a station
+/// may have (2^26 pixels, `optics::station`'s validation) at 16 bits. The
+/// decoders refuse a header announcing more before allocating it (PNG's
+/// own default, 64 MiB, would refuse 16-bit frames above 33 Mpx).
+const MAX_FRAME_BYTES: usize = 2 << 26;
+
 fn open(path: &Path) -> Result<BufReader<File>, ImageError> {
     File::open(path)
         .map(BufReader::new)
@@ -92,7 +98,10 @@ fn open(path: &Path) -> Result<BufReader<File>, ImageError> {
 }
 
 fn read_png(path: &Path) -> Result<GrayImage, ImageError> {
-    let mut reader = png::Decoder::new(open(path)?)
+    let limits = png::Limits {
+        bytes: MAX_FRAME_BYTES,
+    };
+    let mut reader = png::Decoder::new_with_limits(open(path)?, limits)
         .read_info()
         .map_err(|e| decode_err(path, e))?;
     let info = reader.info();
@@ -107,8 +116,22 @@ fn read_png(path: &Path) -> Result<GrayImage, ImageError> {
             })
         }
     };
+    // The decoder's limits bound what it buffers, not the frame it asks
+    // for: the header's size is checked here, before the frame is allocated.
+    let (width, height) = (reader.info().width, reader.info().height);
+    let frame_bytes = u64::from(width) * u64::from(height) * u64::from(bits / 8);
+    if frame_bytes > MAX_FRAME_BYTES as u64 {
+        return Err(decode_err(
+            path,
+            format!(
+                "{width}x{height} pixels at {bits} bits: above the {MAX_FRAME_BYTES} bytes a \
+                 frame may have (the largest sensor a station may have)"
+            ),
+        ));
+    }
     let size = reader
         .output_buffer_size()
+        .filter(|&s| s as u64 <= 2 * MAX_FRAME_BYTES as u64)
         .ok_or_else(|| decode_err(path, "image too large"))?;
     let mut buf = vec![0u8; size];
     let out = reader
@@ -135,7 +158,11 @@ fn read_png(path: &Path) -> Result<GrayImage, ImageError> {
 }
 
 fn read_tiff(path: &Path) -> Result<GrayImage, ImageError> {
-    let mut dec = tiff::decoder::Decoder::new(open(path)?).map_err(|e| decode_err(path, e))?;
+    let mut limits = tiff::decoder::Limits::default();
+    limits.decoding_buffer_size = MAX_FRAME_BYTES;
+    let mut dec = tiff::decoder::Decoder::new(open(path)?)
+        .map_err(|e| decode_err(path, e))?
+        .with_limits(limits);
     let (width, height) = dec.dimensions().map_err(|e| decode_err(path, e))?;
     let color = dec.colortype().map_err(|e| decode_err(path, e))?;
     let not_gray = |found: String| ImageError::NotGray {
@@ -151,6 +178,12 @@ fn read_tiff(path: &Path) -> Result<GrayImage, ImageError> {
         tiff::decoder::DecodingResult::U16(v) => (v, 16),
         _ => return Err(not_gray("a non-integer sample type".into())),
     };
+    if data.len() as u64 != u64::from(width) * u64::from(height) {
+        return Err(decode_err(
+            path,
+            format!("{} samples for {width}x{height} pixels", data.len()),
+        ));
+    }
     Ok(GrayImage {
         width,
         height,
@@ -221,6 +254,43 @@ mod tests {
         let img = read_gray(&p).unwrap();
         assert_eq!((img.width, img.height, img.bit_depth), (5, 4, 16));
         assert_eq!(img.data, data);
+    }
+
+    /// Regression (fuzz_readers): a PNG whose IHDR announces 65535×3145728
+    /// pixels aborted allocating them (412 GB) before any pixel was read.
+    #[test]
+    fn png_header_sizes_are_checked_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("f.png");
+        write_png(&p, 4, 4, 16, &[7; 16]).unwrap();
+        let mut b = std::fs::read(&p).unwrap();
+        // IHDR data starts at byte 16: width, height (big-endian), then its CRC at 29.
+        b[16..20].copy_from_slice(&65_535u32.to_be_bytes());
+        b[20..24].copy_from_slice(&3_145_728u32.to_be_bytes());
+        let crc = crc32(&b[12..29]);
+        b[29..33].copy_from_slice(&crc.to_be_bytes());
+        std::fs::write(&p, &b).unwrap();
+        let err = read_gray(&p).unwrap_err().to_string();
+        assert!(
+            err.contains("65535x3145728") && err.contains("bytes a frame"),
+            "{err}"
+        );
+    }
+
+    /// PNG's chunk CRC (ISO 3309), bitwise.
+    fn crc32(data: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &byte in data {
+            c ^= u32::from(byte);
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! `std_nm` of another length than `coefficients_nm`, a negative σ are
 //! errors naming the file and the field. `interchange.md` is the spec.
 
+use crate::optics::zernike::{MAX_RADIAL_ORDER, MAX_TERMS};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize};
@@ -405,12 +406,15 @@ fn check_numbers(
     path: &Path,
 ) -> Result<(), SurfacesFileError> {
     let n = c.coefficients_nm.len();
-    if n == 0 {
+    if n == 0 || n > MAX_TERMS {
         let field = format!("{name}.coefficients_nm");
         return Err(invalid(
             path,
             &field,
-            "expected at least one coefficient".into(),
+            format!(
+                "{n} coefficients: expected 1 to {MAX_TERMS} (every Noll term up to radial \
+                 order {MAX_RADIAL_ORDER})"
+            ),
         ));
     }
     if let Some((k, v)) = c

@@ -42,3 +42,19 @@ fn bad_files_name_the_field() {
         .to_string();
     assert!(err.contains("zernike.radius_mm"), "{err}");
 }
+
+/// More coefficients than any basis holds is an error where the file is
+/// read, not later when the surface is built (issue 19).
+#[test]
+fn more_terms_than_a_basis_holds_are_refused() {
+    let many = vec!["0.0"; MAX_TERMS + 1].join(", ");
+    let text = GOOD.replace("[0.0, 12.5, -3.1, 40.2]", &format!("[{many}]"));
+    let err = load_text(&text).unwrap_err().to_string();
+    assert!(
+        err.contains("front.coefficients_nm") && err.contains("5151"),
+        "{err}"
+    );
+    let most = vec!["0.0"; MAX_TERMS].join(", ");
+    let text = GOOD.replace("[0.0, 12.5, -3.1, 40.2]", &format!("[{most}]"));
+    assert!(load_text(&text).is_ok());
+}

@@ -5,14 +5,17 @@
 
 mod append;
 mod manifest;
+mod range;
 mod writer;
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 pub use manifest::{FrameEntry, ManifestFile, ACQUISITION_FORMAT};
+pub use range::check_against_station;
 pub use writer::{AcquisitionWriter, FrameImage, FrameLayout};
 
+use crate::acquire::patterns::MAX_FRAMES;
 use crate::formats::image_io::{self, ImageError};
 use crate::formats::npy::{NpyError, NpyStackReader};
 
@@ -176,6 +179,15 @@ impl Acquisition {
         }
         if file.frames.is_empty() {
             return Err(invalid("frame".into(), "no [[frame]] tables".into()));
+        }
+        if file.frames.len() > MAX_FRAMES {
+            return Err(invalid(
+                "frame".into(),
+                format!(
+                    "{} [[frame]] tables: above the {MAX_FRAMES} frames an acquisition may have",
+                    file.frames.len()
+                ),
+            ));
         }
         let dir = manifest_path
             .parent()

@@ -126,6 +126,11 @@ pub(crate) fn header_bytes(descr: &str, shape: &[usize]) -> Vec<u8> {
     out
 }
 
+/// The longest header this reader takes, bytes: NumPy's own `np.load`
+/// refuses headers above 10 000 bytes (`max_header_size`) as unsafe; ours
+/// are 128 bytes. Checked before the header is allocated.
+const MAX_HEADER_LEN: usize = 10_000;
+
 /// Reads and parses the header of an open NPY file.
 fn read_header(path: &Path, r: &mut impl Read) -> Result<Header, NpyError> {
     let bad = |problem: String| NpyError::Header {
@@ -151,6 +156,11 @@ fn read_header(path: &Path, r: &mut impl Read) -> Result<Header, NpyError> {
         }
         v => return Err(bad(format!("unsupported format version {v}"))),
     };
+    if len > MAX_HEADER_LEN {
+        return Err(bad(format!(
+            "header of {len} bytes announced: above the {MAX_HEADER_LEN} bytes a header may have"
+        )));
+    }
     let mut dict = vec![0u8; len];
     r.read_exact(&mut dict)
         .map_err(|_| bad("header shorter than announced".into()))?;
@@ -198,6 +208,17 @@ fn read_header(path: &Path, r: &mut impl Read) -> Result<Header, NpyError> {
     })
 }
 
+/// The number of elements of `shape`, or an error when it overflows.
+pub(crate) fn checked_len(path: &Path, shape: &[usize]) -> Result<usize, NpyError> {
+    shape
+        .iter()
+        .try_fold(1usize, |n, &d| n.checked_mul(d))
+        .ok_or_else(|| NpyError::Header {
+            path: path.to_path_buf(),
+            problem: format!("shape {shape:?} has more elements than memory can address"),
+        })
+}
+
 pub(crate) fn open_header(path: &Path) -> Result<(BufReader<File>, Header), NpyError> {
     let mut r = BufReader::new(File::open(path).map_err(io_err(path))?);
     let h = read_header(path, &mut r)?;
@@ -213,17 +234,38 @@ fn read_all(path: &Path, descr: &str, elem: usize) -> Result<(Vec<usize>, Vec<u8
             found: format!("dtype {}", h.descr),
         });
     }
-    let n: usize = h.shape.iter().product();
-    let mut data = Vec::with_capacity(n * elem);
+    // The header's shape is checked against the file's length before
+    // anything of its size is allocated: a corrupt header announcing 2^60
+    // elements is an error, not an allocation.
+    let n = checked_len(path, &h.shape)?;
+    let available = std::fs::metadata(path)
+        .map_err(io_err(path))?
+        .len()
+        .saturating_sub(h.data_offset);
+    let needed = (n as u64).saturating_mul(elem as u64);
+    if available < needed {
+        return Err(NpyError::Truncated {
+            path: path.to_path_buf(),
+            complete: (available / elem as u64) as usize,
+            expected: n,
+        });
+    }
+    if available > needed {
+        return Err(NpyError::Unexpected {
+            path: path.to_path_buf(),
+            expected: format!("{needed} bytes of data for shape {:?}", h.shape),
+            found: format!("{available} bytes (data beyond the array)"),
+        });
+    }
+    let mut data = Vec::with_capacity(needed as usize);
     r.read_to_end(&mut data).map_err(io_err(path))?;
-    if data.len() < n * elem {
+    if data.len() as u64 != needed {
         return Err(NpyError::Truncated {
             path: path.to_path_buf(),
             complete: data.len() / elem,
             expected: n,
         });
     }
-    data.truncate(n * elem);
     Ok((h.shape, data))
 }
 
@@ -366,6 +408,48 @@ mod tests {
         assert!(err.contains("<f8") && err.contains("|u1"), "{err}");
         std::fs::write(&p, header_bytes(">f8", &[1])).unwrap();
         assert!(read_f64(&p).is_err());
+    }
+
+    /// Regression (issue 19): a header announcing more elements than the
+    /// file holds allocated them first ("capacity overflow" panic or an
+    /// abort); a shape whose product overflows panicked in debug builds.
+    #[test]
+    fn header_sizes_are_checked_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.npy");
+        std::fs::write(&p, header_bytes("<f8", &[1 << 60])).unwrap();
+        let err = read_f64(&p).unwrap_err().to_string();
+        assert!(err.contains("truncated"), "{err}");
+        std::fs::write(&p, header_bytes("<f8", &[1 << 40, 1 << 40])).unwrap();
+        let err = read_f64(&p).unwrap_err().to_string();
+        assert!(err.contains("more elements"), "{err}");
+        std::fs::write(&p, header_bytes("<u2", &[1 << 32, 1 << 32, 1 << 32])).unwrap();
+        let err = NpyStackReader::open(&p).unwrap_err().to_string();
+        assert!(err.contains("more elements"), "{err}");
+        // fuzz_readers: 0 frames of 2^40 × 2^40 pixels overflowed the frame size.
+        std::fs::write(&p, header_bytes("<u2", &[0, 1 << 40, 1 << 40])).unwrap();
+        let err = NpyStackReader::open(&p).unwrap_err().to_string();
+        assert!(err.contains("more elements"), "{err}");
+        std::fs::write(&p, header_bytes("<u2", &[3, 0, 4])).unwrap();
+        assert!(NpyStackReader::open(&p).is_err());
+        let mut h = header_bytes("<f8", &[1]);
+        h[8..10].copy_from_slice(&u16::MAX.to_le_bytes());
+        std::fs::write(&p, &h).unwrap();
+        let err = read_f64(&p).unwrap_err().to_string();
+        assert!(err.contains("10000 bytes"), "{err}");
+    }
+
+    /// An array with more data than its shape is an error, not truncated.
+    #[test]
+    fn data_beyond_the_shape_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.npy");
+        write_f64(&p, &[3], &[1.0, 2.0, 3.0]).unwrap();
+        let mut bytes = std::fs::read(&p).unwrap();
+        bytes.extend(4.0f64.to_le_bytes());
+        std::fs::write(&p, &bytes).unwrap();
+        let err = read_f64(&p).unwrap_err().to_string();
+        assert!(err.contains("beyond the array"), "{err}");
     }
 
     proptest! {

@@ -4,7 +4,7 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use super::{header_bytes, io_err, open_header, NpyError, StackDtype};
+use super::{checked_len, header_bytes, io_err, open_header, NpyError, StackDtype};
 
 /// Writes a `[frames, rows, columns]` stack one frame at a time.
 #[derive(Debug)]
@@ -143,7 +143,17 @@ impl NpyStackReader {
         };
         let file = File::open(path).map_err(io_err(path))?;
         let len = file.metadata().map_err(io_err(path))?.len();
-        let frame_bytes = (rows * cols * dtype.size()) as u64;
+        checked_len(path, &[frames, rows, cols, dtype.size()])?;
+        // A stack of 0 frames passes the line above with any frame size.
+        let frame_len = checked_len(path, &[rows, cols, dtype.size()])?;
+        if rows == 0 || cols == 0 {
+            return Err(NpyError::Unexpected {
+                path: path.to_path_buf(),
+                expected: "frames of at least one row and one column".into(),
+                found: format!("shape {:?}", h.shape),
+            });
+        }
+        let frame_bytes = frame_len as u64;
         let complete = len
             .saturating_sub(h.data_offset)
             .checked_div(frame_bytes)

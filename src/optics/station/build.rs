@@ -89,7 +89,30 @@ impl CameraProfile {
     /// # Errors
     /// [`StationError`] naming the file and field.
     pub fn load(path: &Path) -> Result<Self, StationError> {
-        load_profile(path, CAMERA_PROFILE_FORMAT, |p: &Self| &p.format)
+        let p: Self = load_profile(path, CAMERA_PROFILE_FORMAT, |p: &Self| &p.format)?;
+        let bad = |field, problem| Err(profile_error(path, field, problem));
+        if !(p.pixel_pitch_um.is_finite() && p.pixel_pitch_um > 0.0) {
+            return bad(
+                "pixel_pitch_um",
+                format!("expected > 0 µm, found {}", p.pixel_pitch_um),
+            );
+        }
+        // Camera ADCs give 8 to 16 bits; frames are stored as u8 or u16.
+        if !(8..=16).contains(&p.bit_depth) {
+            return bad(
+                "bit_depth",
+                format!("expected 8 to 16 bits, found {}", p.bit_depth),
+            );
+        }
+        Ok(p)
+    }
+}
+
+fn profile_error(path: &Path, field: &'static str, problem: String) -> StationError {
+    StationError::Invalid {
+        path: path.to_path_buf(),
+        field,
+        problem,
     }
 }
 
@@ -99,7 +122,29 @@ impl DisplayProfile {
     /// # Errors
     /// [`StationError`] naming the file and field.
     pub fn load(path: &Path) -> Result<Self, StationError> {
-        load_profile(path, DISPLAY_PROFILE_FORMAT, |p: &Self| &p.format)
+        let p: Self = load_profile(path, DISPLAY_PROFILE_FORMAT, |p: &Self| &p.format)?;
+        let bad = |field, problem| Err(profile_error(path, field, problem));
+        for (field, v) in [
+            ("pixel_pitch_mm", p.pixel_pitch_mm),
+            ("diagonal_in", p.diagonal_in),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(field, format!("expected a finite value > 0, found {v}"));
+            }
+        }
+        // Displays are made to γ ≈ 1.8–2.6; 0.5 to 5 takes any panel,
+        // linearised (1) or not, and refuses what is no gamma at all.
+        if !(0.5..=5.0).contains(&p.gamma) {
+            return bad("gamma", format!("expected 0.5 to 5, found {}", p.gamma));
+        }
+        // An LCD settles in a few to ~100 ms; 10 s is no display's.
+        if !(0.0..=10_000.0).contains(&p.settle_ms) {
+            return bad(
+                "settle_ms",
+                format!("expected 0 to 10000 ms, found {}", p.settle_ms),
+            );
+        }
+        Ok(p)
     }
 }
 

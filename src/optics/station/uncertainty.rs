@@ -86,6 +86,25 @@ pub struct StationUncertainty {
 /// ~16 digits, a hand-typed matrix with fewer; 1e-9 accepts both.
 const SYMMETRY_TOL: f64 = 1e-9;
 
+/// The largest 1σ a degree of freedom may have, and its unit: beyond it
+/// the quantity is not uncertain but unknown, and a linearised budget about
+/// the nominal station means nothing (a camera 1 m off, a screen turned by
+/// 90°). Lengths 1000 mm (the size of a whole station), angles 90°, the
+/// principal point a sensor's largest side (65 536 px), dimensionless
+/// quantities (distortion coefficients, the refractive index) 1.
+fn largest_std(d: Dof) -> (f64, &'static str) {
+    let name = d.name();
+    if name.ends_with("_mm") {
+        (1000.0, "mm")
+    } else if name.ends_with("_deg") {
+        (90.0, "°")
+    } else if name.ends_with("_px") {
+        (65_536.0, "px")
+    } else {
+        (1.0, "(dimensionless)")
+    }
+}
+
 impl StationUncertainty {
     /// Reads and validates a file.
     ///
@@ -149,6 +168,19 @@ impl StationUncertainty {
             }
             check_matrix(&c.matrix, names.len())
                 .map_err(|p| fail("covariance.matrix".into(), p))?;
+            for (k, &d) in names.iter().enumerate() {
+                let (max, unit) = largest_std(d);
+                let std = c.matrix[k][k].sqrt();
+                if std > max {
+                    return Err(fail(
+                        format!("covariance.matrix[{k}][{k}]"),
+                        format!(
+                            "1σ of {} = {std}: above the {max} {unit} that is still an uncertainty",
+                            d.name()
+                        ),
+                    ));
+                }
+            }
             values = c.matrix.clone();
         }
         let correlated = names.len();
@@ -157,6 +189,13 @@ impl StationUncertainty {
             let d = dof(n, field.clone())?;
             if !(s.is_finite() && s >= 0.0) {
                 return Err(fail(field, format!("expected a finite 1σ ≥ 0, found {s}")));
+            }
+            let (max, unit) = largest_std(d);
+            if s > max {
+                return Err(fail(
+                    field,
+                    format!("1σ = {s}: above the {max} {unit} that is still an uncertainty"),
+                ));
             }
             if !names.contains(&d) {
                 names.push(d);
@@ -279,6 +318,30 @@ station = "station.toml"
 names = ["camera.x_mm", "camera.z_mm"]
 matrix = [[0.04, 0.01], [0.01, 0.25]]
 "#;
+
+    /// Issue 19: a 1σ of 1e200 mm was read (and squared to inf in the
+    /// covariance); one above what is still an uncertainty is refused.
+    #[test]
+    fn a_std_beyond_any_uncertainty_is_refused() {
+        let text = SPEC.replace("\"camera.z_mm\" = 0.5", "\"camera.z_mm\" = 1e200");
+        let err = StationUncertainty::from_toml_str(&text, Path::new("u.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("camera.z_mm") && err.contains("1000 mm"),
+            "{err}"
+        );
+        let text = SPEC.replace("\"screen.rz_deg\" = 0.01", "\"screen.rz_deg\" = 120.0");
+        let err = StationUncertainty::from_toml_str(&text, Path::new("u.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("screen.rz_deg") && err.contains("90"), "{err}");
+        let text = SPEC.replace("[0.01, 0.25]]", "[0.01, 4e6]]");
+        let err = StationUncertainty::from_toml_str(&text, Path::new("u.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("covariance.matrix[1][1]"), "{err}");
+    }
 
     #[test]
     fn the_specs_example_reads_and_the_covariance_holds() {

@@ -17,6 +17,40 @@ use super::{
 /// still rejects any real mistake (a wrong sign or swapped column is O(1)).
 const ORTHO_TOL: f64 = 1e-6;
 
+/// The largest sensor or screen a station may have, checked before
+/// anything of that size is allocated.
+struct ResolutionLimit {
+    /// Longest side, px.
+    side_px: u32,
+    /// Width × height.
+    pixels: u64,
+    /// What has it, for the message.
+    what: &'static str,
+}
+
+/// The camera. Every stage holds a few values per camera pixel: the tracer
+/// three paths of 32 B each (96 B), the spectral maps and `screen_coords`
+/// at least 64 B more. At 2^26 = 67 Mpx that is over 10 GB, about what a
+/// workstation gives one process, and above the machine-vision sensors a
+/// station uses (up to 65 Mpx); a side of 65 536 px is 4 times the longest
+/// of them. Beyond either a resolution is a typing error, and a 4e9-pixel
+/// sensor panicked in the tracer.
+const SENSOR_LIMIT: ResolutionLimit = ResolutionLimit {
+    side_px: 65_536,
+    pixels: 1 << 26,
+    what: "a sensor",
+};
+
+/// The screen: a side of 16 384 px is twice an 8K display's 7 680, and the
+/// largest texture a graphics adapter commonly takes; its pixel count
+/// follows from the side. The screen's extent also bounds τ (the display's
+/// Nyquist limit), and with it the spectral stage's frequency grid.
+const SCREEN_LIMIT: ResolutionLimit = ResolutionLimit {
+    side_px: 16_384,
+    pixels: 16_384 * 16_384,
+    what: "a screen",
+};
+
 struct Check<'a> {
     path: &'a Path,
 }
@@ -46,9 +80,33 @@ impl Check<'_> {
         }
     }
 
-    fn resolution(&self, field: &'static str, r: [u32; 2]) -> Result<(), StationError> {
+    fn resolution(
+        &self,
+        field: &'static str,
+        r: [u32; 2],
+        limit: &ResolutionLimit,
+    ) -> Result<(), StationError> {
         if r[0] == 0 || r[1] == 0 {
             return self.fail(field, format!("expected [width, height] > 0, found {r:?}"));
+        }
+        if let Some(side) = r.iter().find(|&&s| s > limit.side_px) {
+            return self.fail(
+                field,
+                format!(
+                    "{side} px: above the {} px {} can have (found {r:?})",
+                    limit.side_px, limit.what
+                ),
+            );
+        }
+        let pixels = u64::from(r[0]) * u64::from(r[1]);
+        if pixels > limit.pixels {
+            return self.fail(
+                field,
+                format!(
+                    "{r:?} is {pixels} pixels: above the {} pixels {} can have",
+                    limit.pixels, limit.what
+                ),
+            );
         }
         Ok(())
     }
@@ -210,7 +268,7 @@ fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
     }
     check.positive("camera.focal_length_mm", c.focal_length_mm)?;
     check.positive("camera.pixel_pitch_um", c.pixel_pitch_um)?;
-    check.resolution("camera.resolution", c.resolution)?;
+    check.resolution("camera.resolution", c.resolution, &SENSOR_LIMIT)?;
     let [w, h] = c.resolution;
     let pp = c
         .principal_point_px
@@ -230,7 +288,7 @@ fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
 
 fn screen(check: &Check, file: &StationFile) -> Result<Screen, StationError> {
     let s = &file.screen;
-    check.resolution("screen.resolution", s.resolution)?;
+    check.resolution("screen.resolution", s.resolution, &SCREEN_LIMIT)?;
     check.positive("screen.pixel_pitch_mm", s.pixel_pitch_mm)?;
     check.finite("screen.origin_mm", &s.origin_mm)?;
     let u_axis = check.unit("screen.u_axis", s.u_axis)?;
