@@ -197,11 +197,23 @@ fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
 fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow::Result<()> {
     let mut display = display;
     let station = Station::load(&args.station)?;
+    // Bounded before expansion: frame count (validate) and τ against what
+    // the station's screen can show (its Nyquist limit).
+    let (sw, sh) = (station.screen.width, station.screen.height);
+    let input = |e: anyhow::Error| super::exit::classified(super::exit::Class::Input, e);
     let patterns = match &args.schedule_file {
-        Some(p) => mfd::acquire::schedule_file::load(p)?.patterns(),
+        Some(p) => {
+            let file = mfd::acquire::schedule_file::load(p).map_err(|e| input(e.into()))?;
+            file.check_against_screen(p, sw, sh)
+                .map_err(|e| input(e.into()))?;
+            file.patterns()
+        }
         None => {
             let schedule = args.schedule.schedule();
-            schedule.validate()?;
+            schedule.validate().map_err(|e| input(e.into()))?;
+            schedule
+                .check_against_screen(sw, sh)
+                .map_err(|e| input(e.into()))?;
             schedule.patterns()
         }
     };
