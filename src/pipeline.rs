@@ -542,7 +542,7 @@ impl Reconstruction {
             source,
         })?;
         let mut written = Vec::new();
-        let inputs = self.inputs.clone().unwrap_or_else(Inputs::new);
+        let inputs = self.inputs.clone().unwrap_or_default();
         let path = out.join(result_dir::INPUTS_FILE);
         write_json(&path, &inputs)?;
         written.push(path);

@@ -225,7 +225,8 @@ pub fn check(
             // the spectral stage's resolve criterion (5σ): a point within
             // it may be a noisy measure of a true one.
             let reach = allowed_px + FAR_SIGMAS * sigma.max(0.0);
-            if !((x[0] - m[0]).hypot(x[1] - m[1]) <= reach) {
+            let d = (x[0] - m[0]).hypot(x[1] - m[1]);
+            if d > reach || d.is_nan() {
                 far[*k] = true;
             }
         }
@@ -357,7 +358,7 @@ fn flag_poor_fits(maps: &mut SpectralMaps, frames: usize) -> usize {
     let mut flagged = 0;
     for chunk in fits.chunks(per) {
         let noise = median(&mut chunk.iter().map(|c| c.1).collect::<Vec<_>>());
-        if !(noise > 0.0) {
+        if noise.is_nan() || noise <= 0.0 {
             continue;
         }
         for &(_, var, k) in chunk {

@@ -51,7 +51,7 @@ impl InputFile {
 }
 
 /// What a result was made from.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Inputs {
     /// The acquisition folder; the digest is its manifest's (which lists
     /// every frame), beside the number of frames read.
@@ -73,13 +73,24 @@ pub struct Inputs {
     pub mfd_version: String,
 }
 
+impl Default for Inputs {
+    /// No inputs named yet, this version of mfd.
+    fn default() -> Inputs {
+        Inputs {
+            acquisition: None,
+            frames: None,
+            screen_coords: None,
+            station: None,
+            uncertainty: None,
+            mfd_version: env!("CARGO_PKG_VERSION").into(),
+        }
+    }
+}
+
 impl Inputs {
     /// No inputs named yet, this version of mfd.
     pub fn new() -> Inputs {
-        Inputs {
-            mfd_version: env!("CARGO_PKG_VERSION").into(),
-            ..Inputs::default()
-        }
+        Inputs::default()
     }
 }
 
