@@ -201,7 +201,8 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
         ),
         (
             vec!["--engine", "statistics", "--band-bins", "0"],
-            "band_bins: expected a number of Fourier bins > 0",
+            // Refused as the command line is read (src/cli/check.rs).
+            "invalid value '0' for '--band-bins <BAND_BINS>'",
         ),
         (
             vec!["--engine", "statistics", "--band-bins", "300"],
