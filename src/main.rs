@@ -29,7 +29,8 @@ Exit status:
        settings differ from the acquisition's
   4    no signal: the data hold nothing to measure (too few points for the
        surfaces)
-  5    inconsistent: the result contradicts the station
+  5    inconsistent: the result contradicts the station (written whole and
+       flagged in consistency.json; --accept-inconsistent exits 0)
   6    device: the camera or display failed (disconnect, no usable frame)
   130  interrupted (Ctrl-C): what was recorded is kept; `--resume` continues";
 
