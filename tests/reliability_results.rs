@@ -38,6 +38,18 @@ fn run(args: &[&str]) -> (i32, String) {
     (out.status.code().unwrap_or(-1), text)
 }
 
+/// `mfd reconstruct ACQ --out OUT EXTRA…`.
+fn reconstruct(acq: &Path, out: &Path, extra: &[&str]) -> (i32, String) {
+    let mut args = vec![
+        "reconstruct",
+        acq.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -51,12 +63,7 @@ fn a_failed_rerun_leaves_the_previous_result_whole() {
     let dir = tempfile::tempdir().unwrap();
     let acq = fixture_copy(dir.path(), &|l| l.to_string());
     let r = dir.path().join("R");
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-    ]);
+    let (code, text) = reconstruct(&acq, &r, &[]);
     assert_eq!(code, 0, "{text}");
     let coords = std::fs::read(r.join("screen_coords.npy")).unwrap();
     let summary = std::fs::read(r.join("summary.json")).unwrap();
@@ -77,14 +84,7 @@ fn a_failed_rerun_leaves_the_previous_result_whole() {
     );
 
     // Nine pixels cannot carry the surfaces' terms: the surface stage fails.
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-        "--roi",
-        "22,22,25,25",
-    ]);
+    let (code, text) = reconstruct(&acq, &r, &["--roi", "22,22,25,25"]);
     assert_ne!(code, 0, "{text}");
     assert!(text.contains("is unchanged"), "{text}");
     assert_eq!(std::fs::read(r.join("screen_coords.npy")).unwrap(), coords);
@@ -106,12 +106,7 @@ fn a_failed_rerun_leaves_the_previous_result_whole() {
     let other = dir.path().join("notes");
     std::fs::create_dir(&other).unwrap();
     std::fs::write(other.join("notes.txt"), "keep").unwrap();
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--out",
-        other.to_str().unwrap(),
-    ]);
+    let (code, text) = reconstruct(&acq, &other, &[]);
     assert_eq!(code, 3, "{text}");
     assert!(text.contains("not an mfd result folder"), "{text}");
     assert_eq!(
@@ -127,12 +122,7 @@ fn a_consistent_acquisition_passes_the_station_check() {
     let dir = tempfile::tempdir().unwrap();
     let acq = fixture_copy(dir.path(), &|l| l.to_string());
     let r = dir.path().join("R");
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-    ]);
+    let (code, text) = reconstruct(&acq, &r, &[]);
     assert_eq!(code, 0, "{text}");
     let c = json(&r.join("consistency.json"));
     assert_eq!(c["consistent"], true, "{c}");
@@ -165,25 +155,14 @@ fn a_manifest_that_contradicts_its_frames_is_flagged() {
         let dir = tempfile::tempdir().unwrap();
         let acq = fixture_copy(dir.path(), edit);
         let r = dir.path().join("R");
-        let (code, text) = run(&[
-            "reconstruct",
-            acq.to_str().unwrap(),
-            "--out",
-            r.to_str().unwrap(),
-        ]);
+        let (code, text) = reconstruct(&acq, &r, &[]);
         // 5: inconsistent; 4: nothing measured, said why. Never 0.
         assert!(code == 5 || code == 4, "{name}: exit {code}: {text}");
         if code == 5 {
             assert!(text.contains("contradict the station"), "{name}: {text}");
             let c = json(&r.join("consistency.json"));
             assert_eq!(c["consistent"], false, "{name}: {c}");
-            let (code, text) = run(&[
-                "reconstruct",
-                acq.to_str().unwrap(),
-                "--out",
-                r.to_str().unwrap(),
-                "--accept-inconsistent",
-            ]);
+            let (code, text) = reconstruct(&acq, &r, &["--accept-inconsistent"]);
             assert_eq!(code, 0, "{name}: {text}");
             let s = json(&r.join("summary.json"));
             assert_eq!(s["consistency"]["consistent"], false, "{name}");
@@ -225,12 +204,7 @@ fn nothing_measured_is_said_in_words() {
     let acq = fixture_copy(dir.path(), &|l| l.to_string());
     dark_frames(&acq);
     let r = dir.path().join("R");
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-    ]);
+    let (code, text) = reconstruct(&acq, &r, &[]);
     assert_eq!(code, 4, "{text}");
     assert!(text.contains("no fringe signal"), "{text}");
     assert!(text.contains("largest count in any frame: 0"), "{text}");
@@ -245,14 +219,7 @@ fn nothing_measured_is_said_in_words() {
     assert_ne!(moved, station);
     let wrong = dir.path().join("wrong.toml");
     std::fs::write(&wrong, moved).unwrap();
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--station",
-        wrong.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-    ]);
+    let (code, text) = reconstruct(&acq, &r, &["--station", wrong.to_str().unwrap()]);
     assert_eq!(code, 4, "{text}");
     assert!(text.contains("no camera pixel sees the element"), "{text}");
 }
@@ -286,12 +253,7 @@ fn fits_on_aliases_of_the_schedule_are_flagged() {
     ]);
     assert_eq!(code, 0, "{text}");
     let r = dir.path().join("R");
-    let (code, text) = run(&[
-        "reconstruct",
-        acq.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-    ]);
+    let (code, text) = reconstruct(&acq, &r, &[]);
     assert_eq!(code, 5, "{text}");
     assert!(text.contains("repeats every screen point"), "{text}");
     let c = json(&r.join("consistency.json"));
