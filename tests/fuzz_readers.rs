@@ -384,24 +384,6 @@ fn npy_dict_edit(b: Vec<u8>, key: &str, f: impl Fn(&str) -> String) -> Vec<u8> {
     out
 }
 
-/// CRC-32 of PNG chunks (ISO 3309, polynomial 0xEDB88320), bitwise: the
-/// fuzzer's own, so that a corrupted chunk still passes the CRC check and
-/// reaches the decoder's header handling.
-fn crc32(data: &[u8]) -> u32 {
-    let mut c = !0u32;
-    for &byte in data {
-        c ^= u32::from(byte);
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
-}
-
 /// Overwrites a big-endian word inside chunk `c`'s data (IHDR's width,
 /// height, depth, ...) and recomputes that chunk's CRC.
 fn png_chunk_edit(mut b: Vec<u8>, c: usize, at: usize, w: u32) -> Vec<u8> {
@@ -425,7 +407,7 @@ fn png_chunk_edit(mut b: Vec<u8>, c: usize, at: usize, w: u32) -> Vec<u8> {
     } else if len > 0 {
         b[pos + 8] = w as u8;
     }
-    let crc = crc32(&b[pos + 4..pos + 8 + len]);
+    let crc = crc32fast::hash(&b[pos + 4..pos + 8 + len]);
     b[pos + 8 + len..pos + 12 + len].copy_from_slice(&crc.to_be_bytes());
     b
 }
