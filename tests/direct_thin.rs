@@ -201,3 +201,60 @@ fn ten_mm_plate_matches_the_per_pixel_route() {
         );
     }
 }
+
+/// A 5 mm plate at n = 2.2: bright Fresnel reflections (14 % and 10 %) put
+/// the simulator's dark level at 3.6 % of full scale, below the 5 % read
+/// noise, so the fringes' troughs clip at 0 in a few percent of the
+/// samples, and the two reflections beat (0.29 bins apart) so the clipped
+/// troughs come at the same samples in every pixel. Left out, the clipped
+/// samples biased the front by 3–12σ of its own σ in defocus, coma and
+/// tilts (RMS of error/σ 3.19 over three seeds); taken as censored, the
+/// errors follow the reported covariance.
+///
+/// Over three seeds the 84 z-scores (28 coefficients j ≥ 2) give RMS(z)
+/// with a sampling spread of about 1/√(2·84) = 0.077 around 1, so the
+/// issue's band 0.8–1.3 sits 2.6σ below and 3.9σ above; each surface's
+/// error over what it reports, pooled over the seeds (36 coefficients
+/// j = 4…15), lies in 0.59–1.49 (χ²₃₆ at 0.1 % and 99.9 %), inside the
+/// issue's 0.67–1.5 only to that spread, so the test asserts the spread.
+#[test]
+fn high_index_plate_has_no_bias_from_clipped_troughs() {
+    let c = case(5.0, 2.2);
+    let (mut z2, mut zn) = (0.0, 0usize);
+    let (mut e2, mut r2) = ([0.0; 2], [0.0; 2]);
+    for seed in [5, 6, 7] {
+        let stage = run(&c, seed, Estimator::Auto).unwrap();
+        assert_eq!(stage.summary.estimator, "surface-domain");
+        let d = stage.direct.as_ref().unwrap();
+        assert!(d.converged, "{:?}", d.iterations);
+        // The scene does clip: most fitted pixels have a clipped sample.
+        assert!(
+            d.clipped.pixels * 2 > d.two_reflection_pixels,
+            "{:?} of {}",
+            d.clipped,
+            d.two_reflection_pixels
+        );
+        assert!(d.iterations.iter().any(|i| i.clipped_imputed));
+        let sol = &stage.solution;
+        let truth = [c.truth.0.coefficients_nm(), c.truth.1.coefficients_nm()];
+        let fitted = [sol.front.coefficients_nm(), sol.back.coefficients_nm()];
+        let std = [&sol.front_std_nm, &sol.back_std_nm];
+        for k in 0..2 {
+            for j in 1..fitted[k].len() {
+                z2 += ((fitted[k][j] - truth[k][j]) / std[k][j]).powi(2);
+                zn += 1;
+            }
+        }
+        let (err, rep) = errors(&c, &stage);
+        for k in 0..2 {
+            e2[k] += err[k].powi(2);
+            r2[k] += rep[k].powi(2);
+        }
+    }
+    let z = (z2 / zn as f64).sqrt();
+    assert!((0.8..1.3).contains(&z), "RMS(error/σ) {z}");
+    for k in 0..2 {
+        let honest = (e2[k] / r2[k]).sqrt();
+        assert!((0.59..1.49).contains(&honest), "{k}: error/reported {honest}");
+    }
+}

@@ -51,6 +51,8 @@ pub struct DirectReport {
     pub converged: bool,
     /// Pixels fitted with two reflections.
     pub two_reflection_pixels: usize,
+    /// The fitted pixels' clipped samples (fitted at their conditional means).
+    pub clipped: direct::Clipped,
     /// Wall time, s.
     pub seconds: f64,
     /// Camera width, pixels (the maps' row length).
@@ -105,6 +107,7 @@ pub(super) fn surfaces_from_frames(
                 iterations: d.iterations,
                 converged: d.converged,
                 two_reflection_pixels: d.two_reflection_pixels,
+                clipped: d.clipped,
                 seconds: d.seconds,
                 width: station.camera.width as usize,
                 predicted: d.predicted,

@@ -103,6 +103,11 @@ pub struct DirectSummary {
     pub converged: bool,
     /// Pixels fitted with two reflections.
     pub two_reflection_pixels: usize,
+    /// Pixels with clipped samples (0 or saturated) and those samples, which
+    /// the fit took as censored (at their conditional means) rather than
+    /// leaving them out.
+    #[serde(default)]
+    pub clipped: crate::solve::direct::Clipped,
     /// Wall time, s.
     pub seconds: f64,
     /// Per outer iteration: objective, terms, step fraction, step in σ.
@@ -201,7 +206,9 @@ station file); a real station's geometry error is not included";
 /// What the surface-domain fit is, for `summary.json`.
 pub const DIRECT_NOTE: &str = "surfaces fitted to the frames: every pixel's exact likelihood at \
 the screen points the surfaces predict, its background, amplitudes and falloff profiled out; \
-sigma from the global Fisher information. `pixels` counts the pixels fitted; \
+sigma from the global Fisher information; samples the camera clipped (0 or saturated) are \
+taken as censored, at their conditional means under the fitted model, once the surfaces \
+describe the data (iterations with clipped_imputed). `pixels` counts the pixels fitted; \
 direct_screen_coords.npy holds the predicted points, direct_chi2.npy each pixel's pull";
 
 /// Pixels that entered the surface stage.
@@ -350,6 +357,7 @@ impl Summary {
             note: DIRECT_NOTE.into(),
             converged: d.converged,
             two_reflection_pixels: d.two_reflection_pixels,
+            clipped: d.clipped,
             seconds: d.seconds,
             iterations: d.iterations.clone(),
             per_pixel_failed: d.per_pixel_failed.clone(),

@@ -35,6 +35,15 @@ pub struct ThinArgs {
     /// Read noise, fraction of full scale (0: noise-free).
     #[arg(long, value_parser = crate::cli::check::non_negative, default_value_t = 0.05)]
     noise: f64,
+    /// Ambient light, in units of full-white screen radiance (`mfd simulate
+    /// --ambient`): the dark level the fringes' troughs reach.
+    #[arg(long, value_parser = crate::cli::check::non_negative, default_value_t = 0.01)]
+    ambient: f64,
+    /// Also render the path with two internal round trips (S3; its Fresnel
+    /// weight is R² of the back's: 2 % at n = 2.2, 0.2 % at n = 1.5),
+    /// which the estimators do not model.
+    #[arg(long)]
+    third_reflection: bool,
     /// Terms of the true surfaces (Noll 1…N; 4…N at 60 nm RMS, tilts 100 nm).
     #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 15)]
     truth_terms: usize,
@@ -50,6 +59,10 @@ pub struct ThinArgs {
     /// Print a markdown table instead of one JSON line per row.
     #[arg(long)]
     markdown: bool,
+    /// Also print, per seed, one JSON line with each fitted coefficient's
+    /// error and σ (the surface-domain fit), for looking at a bias term by term.
+    #[arg(long)]
+    coefficients: bool,
 }
 
 /// One estimator's figures on one acquisition.
@@ -113,6 +126,8 @@ fn row(args: &ThinArgs, t: f64, n: f64) -> anyhow::Result<()> {
     for &seed in &args.seeds {
         let params = SimParams {
             noise_frac: args.noise,
+            ambient: args.ambient,
+            third_reflection: args.third_reflection,
             seed,
             ..SimParams::default()
         };
@@ -136,6 +151,9 @@ fn row(args: &ThinArgs, t: f64, n: f64) -> anyhow::Result<()> {
         match d {
             Ok(d) => {
                 iterations.push(d.iterations.len());
+                if args.coefficients {
+                    print_coefficients([t, n], seed, &d.solution, &truth);
+                }
                 dd.push(Some(figures(&d.solution, &truth)));
             }
             Err(e) => {
@@ -153,6 +171,31 @@ fn row(args: &ThinArgs, t: f64, n: f64) -> anyhow::Result<()> {
     let bound = surface_bound(&station, (front, back), &frames, args.noise, terms)?;
     print_row(args, [t, n], sep, bound, &pp, &dd, &iterations, seconds);
     Ok(())
+}
+
+/// One JSON line: per surface, each coefficient's error (fitted − truth)
+/// and σ, nm, Noll order from j = 1.
+fn print_coefficients([t, n]: [f64; 2], seed: u64, sol: &SurfaceSolution, truth: &[Vec<f64>; 2]) {
+    let one = |fitted: &[f64], std: &[f64], truth: &[f64]| {
+        let rows: Vec<[f64; 2]> = fitted
+            .iter()
+            .zip(std)
+            .enumerate()
+            .map(|(j, (&c, &s))| {
+                let e = c - truth.get(j).copied().unwrap_or(0.0);
+                [round(e, 3), round(s, 3)]
+            })
+            .collect();
+        rows
+    };
+    print_json(&serde_json::json!({
+        "bench": "thin-coefficients",
+        "thickness_mm": t,
+        "index": n,
+        "seed": seed,
+        "front_error_sigma_nm": one(sol.front.coefficients_nm(), &sol.front_std_nm, &truth[0]),
+        "back_error_sigma_nm": one(sol.back.coefficients_nm(), &sol.back_std_nm, &truth[1]),
+    }));
 }
 
 /// Error, reported error and z-scores of `sol` against `truth`.

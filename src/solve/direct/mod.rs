@@ -30,5 +30,5 @@ pub mod pixel;
 pub mod run;
 
 pub use run::{
-    median_separation_bins, solve, DirectError, DirectOptions, DirectSolution, Iteration,
+    median_separation_bins, solve, Clipped, DirectError, DirectOptions, DirectSolution, Iteration,
 };

@@ -69,6 +69,10 @@ pub struct Iteration {
     pub max_step_sigma: f64,
     /// Pixels in the fit.
     pub pixels: usize,
+    /// Whether the clipped samples stood at their conditional means in this
+    /// step (the second phase) or were left out.
+    #[serde(default)]
+    pub clipped_imputed: bool,
 }
 
 /// The estimator's answer.
@@ -94,8 +98,21 @@ pub struct DirectSolution {
     pub converged: bool,
     /// Pixels fitted with two reflections.
     pub two_reflection_pixels: usize,
+    /// Pixels with samples the camera clipped, and those samples: fitted
+    /// at their conditional means (the censored likelihood, see
+    /// [`crate::solve::spectral::model::censored`]).
+    pub clipped: Clipped,
     /// Wall time, s.
     pub seconds: f64,
+}
+
+/// The clipped samples of the fitted pixels.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Clipped {
+    /// Pixels with at least one clipped sample.
+    pub pixels: usize,
+    /// Clipped samples over all fitted pixels.
+    pub samples: usize,
 }
 
 /// One pixel of the fit.
@@ -114,11 +131,38 @@ struct Pix {
     /// The back's share of the traced Fresnel weights `w_b / (w_f + w_b)`
     /// (0 with one reflection).
     back_share: f64,
+    /// Samples the camera clipped (0 or saturated): these stand at their
+    /// conditional means under the pixel's current model
+    /// ([`crate::solve::spectral::model::censored`]), refreshed at every
+    /// linearisation, so that the fit's fixed point is the censored
+    /// likelihood's and no clipped trough biases the surfaces.
+    clipped: usize,
 }
 
 impl Pix {
     fn objective(&self) -> f64 {
         self.lin.samples as f64 * self.lin.rss.max(f64::MIN_POSITIVE).ln()
+    }
+
+    /// The pixel's noise σ from its last linearisation, counts.
+    fn sigma(&self) -> f64 {
+        let dof = self.lin.samples.saturating_sub(self.p.len()).max(1);
+        (self.lin.rss / dof as f64).sqrt()
+    }
+}
+
+/// Candidate `q` linearised at `p`: with `imputed` = `Some(σ)` its
+/// clipped samples stand at their conditional means under `p` with noise σ,
+/// else they are left out.
+fn linearise_at(
+    solver: &SpectralSolver,
+    q: usize,
+    p: &Params,
+    imputed: Option<f64>,
+) -> Option<Linear> {
+    match imputed {
+        None => solver.with_samples(q, |samples, _| linearise(samples, p))?,
+        Some(sigma) => solver.with_samples_at(q, p, sigma, |samples, _| linearise(samples, p))?,
     }
 }
 
@@ -202,6 +246,10 @@ impl Fitted {
         let (predicted, chi2_map) = maps_of(&self.pix, w, h);
         DirectSolution {
             two_reflection_pixels: self.pix.iter().filter(|p| p.p.k == 2).count(),
+            clipped: Clipped {
+                pixels: self.pix.iter().filter(|p| p.clipped > 0).count(),
+                samples: self.pix.iter().map(|p| p.clipped).sum(),
+            },
             solution: self.solution,
             observations: self.obs,
             predicted,
@@ -283,13 +331,26 @@ fn fit(
     let mut last_terms = None;
     let mut solution = None;
     let mut obs = pseudo_observations(station, &pix);
-    for it in 0..opts.max_iter {
+    // Two phases: first with the clipped samples left out, until the
+    // surfaces describe the data; then with them at their conditional
+    // means (EM on the censored likelihood, see `Pix::clipped`), which
+    // needs a model near the data — from a flat start the model is far
+    // from many samples and their imputations mean nothing. Each phase has
+    // `max_iter` iterations.
+    let clipped = pix.iter().any(|x| x.clipped > 0);
+    let mut impute = false;
+    let mut phase_it = 0;
+    for it in 0..2 * opts.max_iter {
+        if phase_it == opts.max_iter {
+            break;
+        }
+        phase_it += 1;
         let sol = reconstruct(&obs, station, &solve_opts)?;
         let terms = [
             sol.front.coefficients_nm().len(),
             sol.back.coefficients_nm().len(),
         ];
-        let (next, step) = step(solver, station, &plate, &sol, &pix, opts.max_halvings);
+        let (next, step) = step(solver, station, &plate, &sol, &pix, opts.max_halvings, impute);
         let max_step_sigma = max_step_sigma(&plate, &sol, step.fraction);
         pix = next;
         plate = step.plate;
@@ -302,6 +363,7 @@ fn fit(
             step_fraction: step.fraction,
             max_step_sigma,
             pixels: pix.len(),
+            clipped_imputed: impute,
         });
         log::debug!(
             "surface-domain fit, iteration {it}: {:?}",
@@ -314,12 +376,20 @@ fn fit(
             solve_opts.terms = Some(terms[0].max(terms[1]));
         }
         last_terms = Some(terms);
-        obs = pseudo_observations(station, &pix);
         solution = Some(sol);
         if same_terms && max_step_sigma < opts.step_tol_sigma {
-            converged = true;
-            break;
+            if impute || !clipped {
+                converged = true;
+                break;
+            }
+            impute = true;
+            phase_it = 0;
+            pix = pix
+                .par_iter()
+                .filter_map(|x| relinearise(solver, station, &plate, x, true))
+                .collect();
         }
+        obs = pseudo_observations(station, &pix);
     }
     let solution = solution.ok_or(DirectError::NotApplicable {
         why: "no iteration allowed (max_iter 0)",
@@ -426,20 +496,18 @@ fn initial_pixels(
             let ij = [(c % w) as u32, (c / w) as u32];
             let dir = cam.ray_direction(ij[0], ij[1]).into_inner();
             let s = predict(plate, station, &dir, k)?;
-            solver
-                .with_samples(q, |samples, _| {
-                    let p = start(samples, k, &s, kappa0);
-                    let lin = linearise(samples, &p)?;
-                    Some(Pix {
-                        q,
-                        cam: ij,
-                        dir,
-                        p,
-                        lin,
-                        back_share,
-                    })
-                })
-                .flatten()
+            let (p, clipped) =
+                solver.with_samples(q, |samples, clipped| (start(samples, k, &s, kappa0), clipped))?;
+            let lin = linearise_at(solver, q, &p, None)?;
+            Some(Pix {
+                q,
+                cam: ij,
+                dir,
+                p,
+                lin,
+                back_share,
+                clipped,
+            })
         })
         .collect()
 }
@@ -513,6 +581,7 @@ fn step(
     sol: &SurfaceSolution,
     pix: &[Pix],
     max_halvings: usize,
+    impute: bool,
 ) -> (Vec<Pix>, Step) {
     let mut fraction = 1.0;
     loop {
@@ -523,7 +592,7 @@ fn step(
         };
         let moved: Vec<Option<Pix>> = pix
             .par_iter()
-            .map(|x| relinearise(solver, station, &trial, x))
+            .map(|x| relinearise(solver, station, &trial, x, impute))
             .collect();
         let (mut before, mut after) = (0.0, 0.0);
         for (old, new) in pix.iter().zip(&moved) {
@@ -557,10 +626,17 @@ fn step(
 /// `x` moved to the screen points `plate` predicts and linearised there;
 /// `None` where a path no longer reaches the screen or the pixel's
 /// normal equations are singular.
-fn relinearise(solver: &SpectralSolver, station: &Station, plate: &Plate, x: &Pix) -> Option<Pix> {
+fn relinearise(
+    solver: &SpectralSolver,
+    station: &Station,
+    plate: &Plate,
+    x: &Pix,
+    impute: bool,
+) -> Option<Pix> {
     let s = predict(plate, station, &x.dir, x.p.k)?;
     let p = moved(&x.p, &x.lin, &s);
-    let lin = solver.with_samples(x.q, |samples, _| linearise(samples, &p))??;
+    let sigma = (impute && x.clipped > 0).then(|| x.sigma());
+    let lin = linearise_at(solver, x.q, &p, sigma)?;
     Some(Pix { p, lin, ..*x })
 }
 

@@ -13,6 +13,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::acquire::patterns::FringeAxis;
 use crate::kernels::{cos_cycles, sincos_cycles};
 
+pub mod censored;
 pub mod fit;
 
 pub(crate) use fit::ParamCholesky;

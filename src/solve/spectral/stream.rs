@@ -7,7 +7,10 @@ use std::thread::JoinHandle;
 
 use super::batch::{CpuFits, FitBackend, FitBatch, FitSettings};
 use super::maps::SpectralMaps;
-use super::model::{Axis, Design, FrameMeta, Samples, SeriesSamples};
+use super::model::censored::Clip;
+use super::model::{
+    eval_row, Axis, Design, FrameMeta, Params, Samples, SeriesSamples, MAX_REFLECTIONS,
+};
 use super::periodogram::SpectrumPlans;
 use super::phase::{self, PhaseModel, PhaseSchedule, PhaseSettings, Response};
 use super::pixel::PixelFits;
@@ -406,6 +409,49 @@ impl SpectralSolver {
     /// Starting κ = 1/τ_max² of the fits.
     pub fn kappa_start(&self) -> f64 {
         self.config.kappa_start(&self.design)
+    }
+
+    /// [`Self::with_samples`] with the clipped samples standing at their
+    /// conditional means under the model at `p` with noise `sigma`
+    /// ([`super::model::censored`]) instead of left out: a least-squares fit on them has
+    /// the censored likelihood's gradient at `p`.
+    pub fn with_samples_at<R>(
+        &self,
+        q: usize,
+        p: &Params,
+        sigma: f64,
+        f: impl FnOnce(&dyn Samples, usize) -> R,
+    ) -> Option<R> {
+        if self.phase.is_some() || q >= self.prior.candidates.len() {
+            return None;
+        }
+        let sat = self.saturation();
+        let clip = Clip::new(sat);
+        let level = |i: usize, v: u16| {
+            let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
+            let mu = eval_row(&self.design, &self.design.frames[i], p, &mut row);
+            clip.imputed(v, mu, sigma)
+        };
+        if let Some(stats) = &self.stats {
+            let (data, clipped) = stats.samples_imputed(&self.design, q, sat, &level)?;
+            return Some(f(&data, clipped));
+        }
+        let n = self.frames();
+        let mut clipped = 0;
+        let y: Vec<f64> = self.series[q * n..(q + 1) * n]
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| {
+                if v == 0 || sat.is_some_and(|s| v >= s) {
+                    clipped += 1;
+                    level(i, v)
+                } else {
+                    f64::from(v)
+                }
+            })
+            .collect();
+        let data = SeriesSamples::new(&self.design, &self.plans, &y, self.kappa_start());
+        Some(f(&data, clipped))
     }
 
     /// `f` of candidate `q`'s samples as the fits see them (its series, or

@@ -25,6 +25,30 @@ impl Statistics {
         p: usize,
         saturation: Option<u16>,
     ) -> Option<(StatisticsSamples<'a>, usize)> {
+        self.samples_with(design, p, saturation, None)
+    }
+
+    /// [`Self::samples`] with each clipped sample put back at the value
+    /// `impute(frame, reading)` gives (its conditional mean under a model:
+    /// [`crate::solve::spectral::model::censored`]) instead of left out;
+    /// the count returned is still that of the clipped samples.
+    pub fn samples_imputed<'a>(
+        &'a self,
+        design: &'a Design,
+        p: usize,
+        saturation: Option<u16>,
+        impute: &dyn Fn(usize, u16) -> f64,
+    ) -> Option<(StatisticsSamples<'a>, usize)> {
+        self.samples_with(design, p, saturation, Some(impute))
+    }
+
+    fn samples_with<'a>(
+        &'a self,
+        design: &'a Design,
+        p: usize,
+        saturation: Option<u16>,
+        impute: Option<&dyn Fn(usize, u16) -> f64>,
+    ) -> Option<(StatisticsSamples<'a>, usize)> {
         if self.counts[p] > self.cap {
             return None;
         }
@@ -40,9 +64,12 @@ impl Statistics {
             let pd = &mut dirs[self.tables.frame_pos[s.frame as usize].0];
             if s.value == 0 || saturation.is_some_and(|sat| s.value >= sat) {
                 excluded += 1;
-                self.exclude(pd, s);
+                match impute {
+                    Some(f) => self.restore(pd, s, y0, f(s.frame as usize, s.value)),
+                    None => self.exclude(pd, s),
+                }
             } else {
-                self.restore(pd, s, y0);
+                self.restore(pd, s, y0, f64::from(s.value));
             }
         }
         for (pd, t) in dirs.iter_mut().zip(&self.tables.dirs) {
@@ -136,11 +163,11 @@ impl Statistics {
         }
     }
 
-    /// Puts the set-aside sample `s` (not clipped after all) into `pd`'s
-    /// data sums, about the pixel's reference count `y0`.
-    fn restore(&self, pd: &mut PixelDir, s: &SetAside, y0: f64) {
+    /// Puts the set-aside sample `s` (not clipped after all, or clipped and
+    /// standing at its imputed value) into `pd`'s data sums at value `y`,
+    /// about the pixel's reference count `y0`.
+    fn restore(&self, pd: &mut PixelDir, s: &SetAside, y0: f64, y: f64) {
         let (e1, cd, _) = self.set_aside_terms(pd, s);
-        let y = f64::from(s.value);
         for (o, &l) in pd.z.iter_mut().zip(cd) {
             *o += e1 * (y * l);
         }
