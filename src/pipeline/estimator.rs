@@ -53,6 +53,8 @@ pub struct DirectReport {
     pub two_reflection_pixels: usize,
     /// The fitted pixels' clipped samples (fitted at their conditional means).
     pub clipped: direct::Clipped,
+    /// The third reflection's factor and σ, where the frames showed it.
+    pub third_reflection: Option<direct::ThirdReflection>,
     /// Wall time, s.
     pub seconds: f64,
     /// Camera width, pixels (the maps' row length).
@@ -108,6 +110,7 @@ pub(super) fn surfaces_from_frames(
                 converged: d.converged,
                 two_reflection_pixels: d.two_reflection_pixels,
                 clipped: d.clipped,
+                third_reflection: d.third_reflection,
                 seconds: d.seconds,
                 width: station.camera.width as usize,
                 predicted: d.predicted,

@@ -108,6 +108,11 @@ pub struct DirectSummary {
     /// leaving them out.
     #[serde(default)]
     pub clipped: crate::solve::direct::Clipped,
+    /// The third reflection (two internal round trips) where the frames
+    /// showed it: `B3 = factor · ρ · B2`, ρ the traced Fresnel ratio (1 for
+    /// bare glass), with its σ; absent where it was not modelled.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub third_reflection: Option<crate::solve::direct::ThirdReflection>,
     /// Wall time, s.
     pub seconds: f64,
     /// Per outer iteration: objective, terms, step fraction, step in σ.
@@ -358,6 +363,7 @@ impl Summary {
             converged: d.converged,
             two_reflection_pixels: d.two_reflection_pixels,
             clipped: d.clipped,
+            third_reflection: d.third_reflection,
             seconds: d.seconds,
             iterations: d.iterations.clone(),
             per_pixel_failed: d.per_pixel_failed.clone(),

@@ -31,4 +31,5 @@ pub mod run;
 
 pub use run::{
     median_separation_bins, solve, Clipped, DirectError, DirectOptions, DirectSolution, Iteration,
+    ThirdReflection,
 };

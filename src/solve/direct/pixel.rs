@@ -24,7 +24,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::solve::spectral::model::{Params, Samples, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{Normal, Params, Samples, MAX_REFLECTIONS};
 
 /// A pixel's linearisation at its current parameters.
 #[derive(Debug, Clone, Copy)]
@@ -62,11 +62,107 @@ fn split(k: usize) -> (Vec<usize>, Vec<usize>) {
     (nuisance, screen)
 }
 
+/// The third reflection (two internal round trips, S3) tied to the back's:
+/// its amplitude `ratio · B2` and its screen point `uv` both follow from
+/// the surfaces (the traced Fresnel ratio scaled by the global factor the
+/// data estimate, the traced S3), so it adds no per-pixel unknown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tie {
+    /// `B3 / B2`.
+    pub ratio: f64,
+    /// S3, px.
+    pub uv: [f64; 2],
+}
+
+/// The two-reflection parameters `p` with the tied third reflection added
+/// (K = 3, `B3 = ratio · B2` at S3).
+fn with_third(p: &Params, tie: &Tie) -> Params {
+    let mut q = *p;
+    q.k = 3;
+    q.amp[2] = tie.ratio * p.amp[1];
+    q.uv[2] = tie.uv;
+    q
+}
+
+/// The tied model's normal equations in the two-reflection parameters of
+/// `p` (A, B1, B2, u1, v1, u2, v2, κ): the three-reflection ones at
+/// [`with_third`] reduced by `J₂ = J₃ T`, where T maps B2 onto B2 and
+/// `ratio`·B3 and holds S3 (its columns drop out).
+fn tied_normal(samples: &dyn Samples, p: &Params, tie: &Tie) -> Normal {
+    let full = samples.normal(&with_third(p, tie));
+    // Full layout (K = 3): A 0, B 1–3, (u, v) 4–9, κ 10.
+    let t = tie_map(tie.ratio);
+    Normal {
+        rss: full.rss,
+        jtj: t.transpose() * &full.jtj * &t,
+        jtr: t.transpose() * &full.jtr,
+    }
+}
+
+/// T of [`tied_normal`]: 11 × 8.
+fn tie_map(ratio: f64) -> DMatrix<f64> {
+    let mut t = DMatrix::zeros(11, 8);
+    for (full, red) in [
+        (0, 0),
+        (1, 1),
+        (2, 2),
+        (4, 3),
+        (5, 4),
+        (6, 5),
+        (7, 6),
+        (10, 7),
+    ] {
+        t[(full, red)] = 1.0;
+    }
+    t[(3, 2)] = ratio;
+    t
+}
+
+/// How the tied third reflection's global factor γ (`B3 = γ ρ B2`, ρ the
+/// traced Fresnel ratio) would move this pixel's fit: the score and
+/// information of γ at `p` with `tie` (ratio γρ), every one of the pixel's
+/// own parameters profiled out (its screen points too: holding them at
+/// the surfaces' prediction would leave γ's step to the surfaces, which
+/// have already bent to absorb the third path, and the alternation would
+/// crawl), both divided by the pixel's σ². Summed over pixels,
+/// `Σ score / Σ information` is the Gauss–Newton step of γ and
+/// `1/√Σ information` its σ (conservative: what the surfaces share
+/// between pixels is not counted).
+pub fn third_score(samples: &dyn Samples, p: &Params, tie: &Tie, rho: f64) -> Option<[f64; 2]> {
+    let full = samples.normal(&with_third(p, tie));
+    let t = tie_map(tie.ratio);
+    // γ's column: ∂μ/∂γ = ρ B2 · (B3's column).
+    let mut t_ext = DMatrix::zeros(11, 9);
+    t_ext.columns_mut(0, 8).copy_from(&t);
+    t_ext[(3, 8)] = rho * p.amp[1];
+    let jtj = t_ext.transpose() * &full.jtj * &t_ext;
+    let jtr = t_ext.transpose() * &full.jtr;
+    let h_tt = jtj.view((0, 0), (8, 8)).clone_owned();
+    let h_tg = jtj.view((0, 8), (8, 1)).clone_owned();
+    let chol = h_tt.cholesky()?;
+    let a = chol.solve(&h_tg);
+    let g_t = jtr.rows(0, 8).clone_owned();
+    let info = jtj[(8, 8)] - (h_tg.transpose() * &a)[(0, 0)];
+    let score = jtr[8] - (a.transpose() * &g_t)[(0, 0)];
+    let dof = samples.count().checked_sub(p.len()).filter(|&d| d > 0)? as f64;
+    let sigma2 = full.rss / dof;
+    (info > 0.0 && sigma2 > 0.0 && score.is_finite()).then_some([score / sigma2, info / sigma2])
+}
+
 /// The pixel's linearisation at `p`; `None` where its normal equations do
 /// not determine the points (a singular block: no signal, or κ running off).
 pub fn linearise(samples: &dyn Samples, p: &Params) -> Option<Linear> {
+    linearise_tied(samples, p, None)
+}
+
+/// [`linearise`] with the tied third reflection of `tie` in the model (two
+/// reflections in `p`).
+pub fn linearise_tied(samples: &dyn Samples, p: &Params, tie: Option<&Tie>) -> Option<Linear> {
     let k = p.k;
-    let normal = samples.normal(p);
+    let normal = match tie {
+        Some(tie) if k == 2 => tied_normal(samples, p, tie),
+        _ => samples.normal(p),
+    };
     let n = samples.count();
     let dof = n.checked_sub(p.len()).filter(|&d| d > 0)? as f64;
     let (ni, si) = split(k);

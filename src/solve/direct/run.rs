@@ -5,10 +5,10 @@
 
 use std::time::Instant;
 
-use nalgebra::Vector3;
+use nalgebra::{Unit, Vector3};
 use rayon::prelude::*;
 
-use super::pixel::{linearise, moved, start, Linear};
+use super::pixel::{linearise_tied, moved, start, third_score, Linear, Tie};
 use crate::optics::station::Station;
 use crate::optics::trace::Plate;
 use crate::optics::zernike::{ZernikeBasis, ZernikeSurface};
@@ -73,6 +73,63 @@ pub struct Iteration {
     /// step (the second phase) or were left out.
     #[serde(default)]
     pub clipped_imputed: bool,
+    /// The third reflection's global factor γ in this step (0: not
+    /// modelled).
+    #[serde(default)]
+    pub third_reflection: f64,
+}
+
+/// Adds γ's uncertainty to the surfaces' covariance: `σ_γ² d dᵀ`, with `d`
+/// the surfaces' change per unit γ, from the fixed points at γ = 0
+/// (`before`) and at the estimate (the solution's coefficients).
+fn add_third_uncertainty(sol: &mut SurfaceSolution, before: &[Vec<f64>; 2], t: &ThirdReflection) {
+    if t.factor == 0.0 {
+        return;
+    }
+    let layout = sol.layout.clone();
+    let mut d = nalgebra::DVector::zeros(layout.columns());
+    let surfaces = [sol.front.coefficients_nm(), sol.back.coefficients_nm()];
+    for (side, now) in surfaces.iter().enumerate() {
+        for (k, &c) in now.iter().enumerate() {
+            let col = if side == 0 {
+                layout.front_col(k)
+            } else {
+                layout.back_col(k)
+            };
+            if let Some(col) = col.filter(|&c| c < d.len()) {
+                let was = before[side].get(k).copied().unwrap_or(0.0);
+                d[col] = (c - was) / t.factor;
+            }
+        }
+    }
+    if sol.covariance.nrows() != d.len() {
+        return;
+    }
+    sol.covariance += (t.sigma * t.sigma) * &d * d.transpose();
+    for (k, s) in sol.front_std_nm.iter_mut().enumerate() {
+        if let Some(col) = layout.front_col(k) {
+            *s = sol.covariance[(col, col)].max(0.0).sqrt();
+        }
+    }
+    for (k, s) in sol.back_std_nm.iter_mut().enumerate() {
+        if let Some(col) = layout.back_col(k) {
+            *s = sol.covariance[(col, col)].max(0.0).sqrt();
+        }
+    }
+}
+
+/// Steps of the third reflection's factor γ at most.
+const THIRD_ROUNDS: usize = 3;
+
+/// The third reflection (two internal round trips) as the fit modelled it:
+/// `B3 = factor · ρ · B2` per pixel, ρ the traced Fresnel ratio (1 for bare
+/// glass), estimated from all pixels at once.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ThirdReflection {
+    /// γ.
+    pub factor: f64,
+    /// Its σ.
+    pub sigma: f64,
 }
 
 /// The estimator's answer.
@@ -102,6 +159,9 @@ pub struct DirectSolution {
     /// at their conditional means (the censored likelihood, see
     /// [`crate::solve::spectral::model::censored`]).
     pub clipped: Clipped,
+    /// The third reflection's factor, where the data showed it (else the
+    /// model has two reflections).
+    pub third_reflection: Option<ThirdReflection>,
     /// Wall time, s.
     pub seconds: f64,
 }
@@ -159,11 +219,40 @@ fn linearise_at(
     q: usize,
     p: &Params,
     imputed: Option<f64>,
+    tie: Option<&Tie>,
 ) -> Option<Linear> {
+    let lin =
+        |samples: &dyn crate::solve::spectral::model::Samples, _| linearise_tied(samples, p, tie);
     match imputed {
-        None => solver.with_samples(q, |samples, _| linearise(samples, p))?,
-        Some(sigma) => solver.with_samples_at(q, p, sigma, |samples, _| linearise(samples, p))?,
+        None => solver.with_samples(q, lin)?,
+        Some(sigma) => solver.with_samples_at(q, p, sigma, lin)?,
     }
+}
+
+/// The tied third reflection of a two-reflection pixel on `plate` with
+/// global factor `gamma`: S3 and `B3/B2 = γ ρ` (ρ the traced Fresnel
+/// ratio of the third path to the back's); `None` where the third path
+/// does not reach the screen. Also returns ρ.
+fn third_of(
+    plate: &Plate,
+    station: &Station,
+    dir: &Vector3<f64>,
+    gamma: f64,
+) -> Option<(Tie, f64)> {
+    let paths = plate.trace_ray(
+        &station.camera.position_mm,
+        &Unit::new_normalize(*dir),
+        &station.screen,
+    );
+    let (b, t) = (paths.back.ok()?, paths.third.ok()?);
+    let rho = t.weight / b.weight;
+    rho.is_finite().then_some((
+        Tie {
+            ratio: gamma * rho,
+            uv: [t.u, t.v],
+        },
+        rho,
+    ))
 }
 
 /// Fits the surfaces to the frames `solver` holds (after its per-pixel
@@ -218,6 +307,7 @@ struct Fitted {
     solution: SurfaceSolution,
     iterations: Vec<Iteration>,
     converged: bool,
+    third: Option<ThirdReflection>,
 }
 
 impl Fitted {
@@ -246,6 +336,7 @@ impl Fitted {
         let (predicted, chi2_map) = maps_of(&self.pix, w, h);
         DirectSolution {
             two_reflection_pixels: self.pix.iter().filter(|p| p.p.k == 2).count(),
+            third_reflection: self.third,
             clipped: Clipped {
                 pixels: self.pix.iter().filter(|p| p.clipped > 0).count(),
                 samples: self.pix.iter().map(|p| p.clipped).sum(),
@@ -331,16 +422,29 @@ fn fit(
     let mut last_terms = None;
     let mut solution = None;
     let mut obs = pseudo_observations(station, &pix);
-    // Two phases: first with the clipped samples left out, until the
-    // surfaces describe the data; then with them at their conditional
+    // Phases, each of at most `max_iter` iterations, each started from the
+    // last's fixed point. First with the clipped samples left out, until
+    // the surfaces describe the data; then with them at their conditional
     // means (EM on the censored likelihood, see `Pix::clipped`), which
     // needs a model near the data — from a flat start the model is far
-    // from many samples and their imputations mean nothing. Each phase has
-    // `max_iter` iterations.
+    // from many samples and their imputations mean nothing. Then, with two
+    // reflections, the third reflection's global factor γ (`B3 = γ ρ B2`,
+    // ρ the traced Fresnel ratio): a score test at γ = 0; where the data
+    // show the third path (|step| > 5σ: bare glass of high index) γ is
+    // estimated, refitting after each of at most `THIRD_ROUNDS` steps until
+    // a step is below a tenth of its σ. Where they do not (an independent
+    // renderer without it, coated faces, low index: R² = 0.2 % at 1.5),
+    // it is not modelled.
     let clipped = pix.iter().any(|x| x.clipped > 0);
-    let mut impute = false;
+    let mut model = Model::default();
+    let mut third = None;
+    let mut rounds = 0;
     let mut phase_it = 0;
-    for it in 0..2 * opts.max_iter {
+    // The surfaces at γ = 0, kept when the third is first modelled: with
+    // the final ones they give the surfaces' change per unit γ, through
+    // which γ's σ enters their covariance.
+    let mut without_third: Option<[Vec<f64>; 2]> = None;
+    for it in 0..(2 + THIRD_ROUNDS) * opts.max_iter {
         if phase_it == opts.max_iter {
             break;
         }
@@ -350,7 +454,15 @@ fn fit(
             sol.front.coefficients_nm().len(),
             sol.back.coefficients_nm().len(),
         ];
-        let (next, step) = step(solver, station, &plate, &sol, &pix, opts.max_halvings, impute);
+        // A step below the convergence scale is taken whole: its objective
+        // change is at the level of rounding in Σ N ln RSS (~1e-9 of it),
+        // where halving only repeats the relinearisation.
+        let halvings = if max_step_sigma(&plate, &sol, 1.0) < opts.step_tol_sigma {
+            0
+        } else {
+            opts.max_halvings
+        };
+        let (next, step) = step(solver, station, &plate, &sol, &pix, halvings, &model);
         let max_step_sigma = max_step_sigma(&plate, &sol, step.fraction);
         pix = next;
         plate = step.plate;
@@ -363,7 +475,8 @@ fn fit(
             step_fraction: step.fraction,
             max_step_sigma,
             pixels: pix.len(),
-            clipped_imputed: impute,
+            clipped_imputed: model.impute,
+            third_reflection: model.gamma,
         });
         log::debug!(
             "surface-domain fit, iteration {it}: {:?}",
@@ -377,29 +490,68 @@ fn fit(
         }
         last_terms = Some(terms);
         solution = Some(sol);
-        if same_terms && max_step_sigma < opts.step_tol_sigma {
-            if impute || !clipped {
+        obs = pseudo_observations(station, &pix);
+        if !(same_terms && max_step_sigma < opts.step_tol_sigma) {
+            continue;
+        }
+        if clipped && !model.impute {
+            model.impute = true;
+        } else if two && rounds < THIRD_ROUNDS {
+            let Some((d, sd)) = third_step(solver, station, &plate, &pix, &model) else {
+                converged = true;
+                break;
+            };
+            log::debug!(
+                "surface-domain fit: third reflection's factor {} + step {d:.4} (σ {sd:.4})",
+                model.gamma
+            );
+            let settled = if model.gamma == 0.0 {
+                d.abs() < 5.0 * sd
+            } else {
+                d.abs() < 0.1 * sd
+            };
+            if model.gamma != 0.0 || !settled {
+                third = Some(ThirdReflection {
+                    factor: model.gamma + if settled { 0.0 } else { d },
+                    sigma: sd,
+                });
+            }
+            if settled {
                 converged = true;
                 break;
             }
-            impute = true;
-            phase_it = 0;
-            pix = pix
-                .par_iter()
-                .filter_map(|x| relinearise(solver, station, &plate, x, true))
-                .collect();
+            if model.gamma == 0.0 {
+                without_third = Some([
+                    plate.front.coefficients_nm().to_vec(),
+                    plate.back.coefficients_nm().to_vec(),
+                ]);
+            }
+            model.gamma += d;
+            rounds += 1;
+        } else {
+            converged = true;
+            break;
         }
+        phase_it = 0;
+        pix = pix
+            .par_iter()
+            .filter_map(|x| relinearise(solver, station, &plate, x, &model))
+            .collect();
         obs = pseudo_observations(station, &pix);
     }
-    let solution = solution.ok_or(DirectError::NotApplicable {
+    let mut solution = solution.ok_or(DirectError::NotApplicable {
         why: "no iteration allowed (max_iter 0)",
     })?;
+    if let (Some(t), Some(before)) = (third, &without_third) {
+        add_third_uncertainty(&mut solution, before, &t);
+    }
     Ok(Fitted {
         pix,
         obs,
         solution,
         iterations,
         converged,
+        third,
     })
 }
 
@@ -496,9 +648,10 @@ fn initial_pixels(
             let ij = [(c % w) as u32, (c / w) as u32];
             let dir = cam.ray_direction(ij[0], ij[1]).into_inner();
             let s = predict(plate, station, &dir, k)?;
-            let (p, clipped) =
-                solver.with_samples(q, |samples, clipped| (start(samples, k, &s, kappa0), clipped))?;
-            let lin = linearise_at(solver, q, &p, None)?;
+            let (p, clipped) = solver.with_samples(q, |samples, clipped| {
+                (start(samples, k, &s, kappa0), clipped)
+            })?;
+            let lin = linearise_at(solver, q, &p, None, None)?;
             Some(Pix {
                 q,
                 cam: ij,
@@ -563,6 +716,44 @@ fn pseudo_observations(station: &Station, pix: &[Pix]) -> Observations {
     }
 }
 
+/// What the pixels' model holds besides the surfaces: whether clipped
+/// samples stand at their conditional means, and the third reflection's
+/// global factor γ (0: not modelled).
+#[derive(Debug, Clone, Copy, Default)]
+struct Model {
+    impute: bool,
+    gamma: f64,
+}
+
+/// The Gauss–Newton step of the third reflection's global factor γ from
+/// the pixels at `plate` under `model`, and γ's σ (the pixels' own
+/// parameters profiled out, [`third_score`]); `None` where no pixel has a
+/// third path.
+fn third_step(
+    solver: &SpectralSolver,
+    station: &Station,
+    plate: &Plate,
+    pix: &[Pix],
+    model: &Model,
+) -> Option<(f64, f64)> {
+    let [u, i] = pix
+        .par_iter()
+        .filter(|x| x.p.k == 2)
+        .filter_map(|x| {
+            let (tie, rho) = third_of(plate, station, &x.dir, model.gamma)?;
+            let sigma = (model.impute && x.clipped > 0).then(|| x.sigma());
+            let score = |samples: &dyn crate::solve::spectral::model::Samples, _| {
+                third_score(samples, &x.p, &tie, rho)
+            };
+            match sigma {
+                None => solver.with_samples(x.q, score)?,
+                Some(s) => solver.with_samples_at(x.q, &x.p, s, score)?,
+            }
+        })
+        .reduce(|| [0.0, 0.0], |a, b| [a[0] + b[0], a[1] + b[1]]);
+    (i > 0.0).then(|| (u / i, i.sqrt().recip()))
+}
+
 /// The accepted step: its plate, the fraction of the solver's step, the
 /// objective there.
 struct Step {
@@ -581,7 +772,7 @@ fn step(
     sol: &SurfaceSolution,
     pix: &[Pix],
     max_halvings: usize,
-    impute: bool,
+    model: &Model,
 ) -> (Vec<Pix>, Step) {
     let mut fraction = 1.0;
     loop {
@@ -592,7 +783,7 @@ fn step(
         };
         let moved: Vec<Option<Pix>> = pix
             .par_iter()
-            .map(|x| relinearise(solver, station, &trial, x, impute))
+            .map(|x| relinearise(solver, station, &trial, x, model))
             .collect();
         let (mut before, mut after) = (0.0, 0.0);
         for (old, new) in pix.iter().zip(&moved) {
@@ -631,12 +822,16 @@ fn relinearise(
     station: &Station,
     plate: &Plate,
     x: &Pix,
-    impute: bool,
+    model: &Model,
 ) -> Option<Pix> {
     let s = predict(plate, station, &x.dir, x.p.k)?;
     let p = moved(&x.p, &x.lin, &s);
-    let sigma = (impute && x.clipped > 0).then(|| x.sigma());
-    let lin = linearise_at(solver, x.q, &p, sigma)?;
+    let sigma = (model.impute && x.clipped > 0).then(|| x.sigma());
+    let tie = (model.gamma != 0.0 && p.k == 2)
+        .then(|| third_of(plate, station, &x.dir, model.gamma))
+        .flatten()
+        .map(|(t, _)| t);
+    let lin = linearise_at(solver, x.q, &p, sigma, tie.as_ref())?;
     Some(Pix { p, lin, ..*x })
 }
 
