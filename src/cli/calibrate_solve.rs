@@ -72,6 +72,10 @@ pub struct SimulateArgs {
     /// 1σ of a stage reading, µm.
     #[arg(long, value_parser = super::check::positive, default_value_t = 1.0)]
     stage_std_um: f64,
+    /// Marked screen pixels (`[[screen_point]]`) on an N × N grid over the
+    /// screen, read with the stage's noise; 0: none.
+    #[arg(long, default_value_t = 0)]
+    screen_points: u32,
     /// The display's gamma for the flat's phase-shifting frames.
     #[arg(long, value_parser = super::check::gamma, default_value_t = 2.0)]
     display_gamma: f64,
@@ -95,6 +99,7 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let spec = SessionSpec {
         seed: args.seed,
         stage_std_mm: args.stage_std_um * 1e-3,
+        screen_points: [args.screen_points; 2],
         ..SessionSpec::default()
     };
     let session = simulate_session(&truth, &spec)?;
