@@ -17,11 +17,11 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use super::SimError;
 use crate::calibrate::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
 use crate::calibrate::params::{prior, WorldFrame, COVER_GLASS_PRIOR_MM};
+use crate::calibrate::screen_mark::mark_focus;
 use crate::calibrate::session_file::{
     ReferenceFlat, ScreenPoint, SessionElement, SessionFile, StagePoint, TargetPoint,
     SESSION_FORMAT,
 };
-use crate::calibrate::screen_mark::mark_focus;
 use crate::formats::image_io::write_png;
 use crate::optics::refraction::reflect;
 use crate::optics::station::{Distortion, Dof, Station, StationError};
@@ -473,6 +473,7 @@ pub fn example_truth() -> Result<Station, StationError> {
         gamma: 2.2,
         settle_ms: 30.0,
         cover_glass: None,
+        response: None,
     };
     let mut s = layout.build(&camera, &display)?;
     s.camera.distortion = Some(Distortion {
