@@ -48,7 +48,10 @@ fn screen_points_narrow_the_screen_pose() {
     let with = calibrate(&session(5, MARKS).input).unwrap();
     for name in SCREEN_POSE.iter().chain(&["screen.pixel_pitch_mm"]) {
         let (a, b) = (sigma(&without, name), sigma(&with, name));
-        println!("{name:<22} σ {a:.3e} without marks, {b:.3e} with ({:.2}×)", b / a);
+        println!(
+            "{name:<22} σ {a:.3e} without marks, {b:.3e} with ({:.2}×)",
+            b / a
+        );
         assert!(b < a, "{name}: σ {b} with marks against {a} without");
     }
     let joint = |c: &Calibration| c.report.steps.iter().find(|s| s.name == "joint").cloned();
@@ -206,6 +209,8 @@ fn flat_reflected_screen_points_beyond_the_flat_with_marks() {
          mean eᵀC⁻¹e {mean:.3} over {seeds} seeds"
     );
     assert!(worst_on < 0.05, "{worst_on}");
-    assert!((mean - 2.0).abs() < 4.0 * 2.0 / (seeds as f64).sqrt(), "{mean}");
+    assert!(
+        (mean - 2.0).abs() < 4.0 * 2.0 / (seeds as f64).sqrt(),
+        "{mean}"
+    );
 }
-

@@ -42,6 +42,7 @@ pub mod input;
 pub mod make;
 pub mod params;
 pub mod pictures;
+pub mod pictures_sensor;
 pub mod report;
 pub mod resect;
 pub mod residuals;

@@ -49,7 +49,9 @@ pub struct StepReport {
     /// Its residual blocks.
     pub blocks: Vec<BlockReport>,
     /// Readings whose whitened residual lies beyond χ²'s 99.9 % quantile
-    /// for its dimension, worst first.
+    /// for its dimension, worst first. Only the last step's (the joint
+    /// adjustment's, against all the data) say that a reading is wrong:
+    /// an earlier step fits part of the station with the rest still rough.
     pub suspects: Vec<Suspect>,
 }
 
@@ -78,7 +80,11 @@ fn screen_points(
         .iter()
         .map(|l| l.try_inverse().map_or(f64::NAN, |c| c.norm_squared() / 3.0))
         .sum();
-    let chi: Vec<f64> = e.iter().zip(w).map(|(v, l)| (l * v).norm_squared()).collect();
+    let chi: Vec<f64> = e
+        .iter()
+        .zip(w)
+        .map(|(v, l)| (l * v).norm_squared())
+        .collect();
     let limit = chi2_quantile_999(3.0);
     let mut suspects: Vec<Suspect> = e
         .iter()
@@ -90,7 +96,9 @@ fn screen_points(
             residual: v.norm(),
             chi2: c,
             message: format!(
-                "screen_point[{k}]: the reading is {:.4} mm from where the calibrated screen puts                  the mark's focus (χ² {c:.1} over 3 axes, 99.9 % of readings stay below                  {limit:.1}): wrong reading or wrong mark? Read it again",
+                "screen_point[{k}]: the reading is {:.4} mm from where the calibrated screen puts \
+                 the mark's focus (χ² {c:.1} over 3 axes, 99.9 % of readings stay below \
+                 {limit:.1}): wrong reading or wrong mark? Read it again",
                 v.norm()
             ),
         })
@@ -246,7 +254,8 @@ impl Report {
     /// A short summary for the operator.
     pub fn summary(&self) -> String {
         let mut s = String::new();
-        for step in &self.steps {
+        let last = self.steps.len().saturating_sub(1);
+        for (k, step) in self.steps.iter().enumerate() {
             s += &format!(
                 "{:<10} χ²/dof {:.2} ({} dof, {} trials, condition {:.1e})\n",
                 step.name,
@@ -261,8 +270,10 @@ impl Report {
                     b.name, b.count, b.rms, b.unit, b.expected_rms
                 );
             }
-            for x in &step.suspects {
-                s += &format!("  suspect: {}\n", x.message);
+            if k == last {
+                for x in &step.suspects {
+                    s += &format!("  suspect: {}\n", x.message);
+                }
             }
             for h in &step.selection.held {
                 s += &format!(

@@ -128,12 +128,12 @@ impl Whitening {
             .enumerate()
             .map(|(index, m)| {
                 let cov = s2_mark + mark(state, m).focus_cov_mm2;
-                cov.cholesky()
-                    .and_then(|c| c.l().try_inverse())
-                    .ok_or(CalibrationError::BadCovariance {
+                cov.cholesky().and_then(|c| c.l().try_inverse()).ok_or(
+                    CalibrationError::BadCovariance {
                         entry: "screen_point",
                         index,
-                    })
+                    },
+                )
             })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Whitening {
@@ -307,7 +307,11 @@ pub fn item(
     };
     if let Some(i) = take(blocks.flat_points, input.flat_points_stage_mm.len()) {
         return (
-            [flat_point(state, &input.flat_points_stage_mm[i]) / s, 0.0, 0.0],
+            [
+                flat_point(state, &input.flat_points_stage_mm[i]) / s,
+                0.0,
+                0.0,
+            ],
             1,
         );
     }

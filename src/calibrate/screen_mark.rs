@@ -105,8 +105,8 @@ mod tests {
         let eps = 1e-5;
         let ((p1, d1), (p2, d2)) = (ray(theta - eps), ray(theta + eps));
         let cross = |a: [f64; 2], b: [f64; 2]| a[0] * b[1] - a[1] * b[0];
-        // p1 + k d1 on the line p2 + k' d2; d1 × d2 = sin 2ε, exactly.
-        let k = cross([p2[0] - p1[0], p2[1] - p1[1]], d2) / (2.0 * eps).sin();
+        // p1 + k d1 on the line p2 + k' d2; d1 × d2 = sin(−2ε), exactly.
+        let k = cross([p2[0] - p1[0], p2[1] - p1[1]], d2) / (-2.0 * eps).sin();
         let tangential = [p1[0] + k * d1[0], p1[1] + k * d1[1]];
         let (e, d) = ray(theta);
         let back = e[0] / d[0];
@@ -131,7 +131,10 @@ mod tests {
             assert!(off < 1e-8, "{tilt}°: {off}");
             let spread = (t - sg).norm();
             let sigma = f.focus_cov_mm2.trace().sqrt();
-            assert!((sigma - spread / 12f64.sqrt()).abs() < 1e-8, "{sigma} {spread}");
+            assert!(
+                (sigma - spread / 12f64.sqrt()).abs() < 1e-8,
+                "{sigma} {spread}"
+            );
         }
     }
 
@@ -148,6 +151,9 @@ mod tests {
             cover_glass: None,
             ..s
         };
-        assert_eq!(mark_focus(&bare, &Vector3::z_axis(), 50.0, 50.0).world_mm, p);
+        assert_eq!(
+            mark_focus(&bare, &Vector3::z_axis(), 50.0, 50.0).world_mm,
+            p
+        );
     }
 }
