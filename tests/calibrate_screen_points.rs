@@ -214,3 +214,37 @@ fn flat_reflected_screen_points_beyond_the_flat_with_marks() {
         "{mean}"
     );
 }
+
+#[test]
+fn the_session_check_names_a_wrong_screen_point_reading() {
+    // Before anything is solved: the marks' readings lie on the screen's
+    // plane grid, so one read 5 mm off stands 5 mm off the others' affine
+    // map (against 1 µm of stage noise and ~14 µm of focus spread) and the
+    // check names it; the right readings of the same session stay below
+    // χ²(3)'s 99.9 % quantile and are not named.
+    let dir = tempfile::tempdir().unwrap();
+    let truth = example_truth().unwrap();
+    let spec = SessionSpec {
+        seed: 5,
+        screen_points: MARKS,
+        targets_grid: [3, 2],
+        ..SessionSpec::default()
+    };
+    let sim = simulate_session(&truth, &spec).unwrap();
+    mfd::sim::session::write_session(&sim, dir.path()).unwrap();
+    let named = |dir: &std::path::Path| -> Vec<String> {
+        mfd::calibrate::check::check(dir)
+            .findings
+            .iter()
+            .filter_map(|f| f.entry.clone())
+            .filter(|e| e.starts_with("screen_point"))
+            .collect()
+    };
+    assert!(named(dir.path()).is_empty(), "{:?}", named(dir.path()));
+    let path = dir.path().join("session.toml");
+    let mut file: mfd::calibrate::session_file::SessionFile =
+        toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    file.screen_point[4].stage_mm[0] += 5.0;
+    std::fs::write(&path, toml::to_string(&file).unwrap()).unwrap();
+    assert_eq!(named(dir.path()), vec!["screen_point[4]".to_string()]);
+}

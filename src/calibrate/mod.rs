@@ -34,6 +34,7 @@ pub mod adjust;
 pub mod calibration;
 pub mod centroid;
 pub mod check;
+mod check_marks;
 pub mod dlt;
 pub mod error;
 pub mod frame;
