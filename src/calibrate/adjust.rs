@@ -25,7 +25,7 @@ use serde::Serialize;
 
 use super::error::CalibrationError;
 use super::input::CalibrationInput;
-use super::params::{Param, State};
+use super::params::{difference, Param, State};
 use super::residuals::{item, item_count, Blocks, Whitening};
 use crate::kernels::lm::{minimise, Damping, LeastSquares, Linearisation};
 
@@ -299,13 +299,16 @@ pub struct Adjusted {
 
 /// Adjusts `start` over the parameters of `candidates` that the data
 /// determine, against the residual `blocks`, with the whitening fixed at
-/// `start`.
+/// `start`. A parameter it holds is put back at its value in `nominal`
+/// (what the session knew before any data): an earlier step with other
+/// data may have moved it, and its prior σ is about the nominal value.
 ///
 /// # Errors
 /// [`CalibrationError::NotConverged`] naming `step`.
 pub fn adjust(
     input: &CalibrationInput,
     start: State,
+    nominal: &State,
     candidates: &[Param],
     blocks: Blocks,
     step: &'static str,
@@ -319,6 +322,13 @@ pub fn adjust(
     };
     let (keep, selection) = select(all.evaluate(&start).jtj(), candidates);
     let estimated: Vec<Param> = keep.iter().map(|&i| candidates[i]).collect();
+    let start = (0..candidates.len())
+        .filter(|i| !keep.contains(i))
+        .fold(start, |s, i| {
+            let p = candidates[i];
+            let back = difference(&s, nominal, &[p])[0];
+            s.perturbed(p, back)
+        });
     let problem = Problem {
         params: &estimated,
         ..all

@@ -1,6 +1,6 @@
 //! The calibration's single entry point, [`calibrate`]: the world frame's
 //! plane from the flat points (linear), the camera by resection, the screen
-//! from the flat's fringe map, then one joint adjustment of everything
+//! from the flat's fringe map and the marked screen pixels, then one joint adjustment of everything
 //! against all the data; and what it writes ([`Calibration::write`]):
 //! `station.toml` (`mfd-station/2`), `station_uncertainty.toml`
 //! (`mfd-station-uncertainty/1`) and `report.json`.
@@ -123,6 +123,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         element_points: false,
         targets: false,
         flat_map: true,
+        screen_points: true,
     };
     let mut screen_params: Vec<Param> = dofs_of("screen.");
     if input.nominal.screen.cover_glass.is_some() {
@@ -131,6 +132,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
     let screen = adjust(
         input,
         camera.state.clone(),
+        &start,
         &screen_params,
         screen_blocks,
         "screen",
@@ -140,7 +142,14 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
     if input.nominal.screen.cover_glass.is_some() {
         all.push(Param::CoverGlassThickness);
     }
-    let joint = adjust(input, screen.state.clone(), &all, Blocks::ALL, "joint")?;
+    let joint = adjust(
+        input,
+        screen.state.clone(),
+        &start,
+        &all,
+        Blocks::ALL,
+        "joint",
+    )?;
     let steps = vec![
         StepReport::new("resection", input, &camera, resection_blocks()),
         StepReport::new("screen", input, &screen, screen_blocks),
@@ -173,6 +182,7 @@ fn resection_blocks() -> Blocks {
         element_points: false,
         targets: true,
         flat_map: false,
+        screen_points: false,
     }
 }
 

@@ -1,8 +1,9 @@
 //! A check of a session in progress: everything missing or wrong before
 //! anything is solved, in the operator's words — every rule of the spec
 //! that fails (not only the first), the reference plane's fit against the
-//! stage noise, each target's centroid, and each target's spot against
-//! where the nominal station puts it.
+//! stage noise, each target's centroid, each target's spot against
+//! where the nominal station puts it, and the marked screen pixels against
+//! the plane grid they lie on (`check_marks.rs`).
 //!
 //! The nominal station is rough, so its predictions are off by a smooth
 //! pattern. A target is flagged when its spot is off the central
@@ -83,7 +84,7 @@ impl CheckReport {
             .count()
     }
 
-    fn push(&mut self, severity: Severity, entry: Option<String>, message: String) {
+    pub(super) fn push(&mut self, severity: Severity, entry: Option<String>, message: String) {
         self.findings.push(Finding {
             severity,
             entry,
@@ -185,6 +186,7 @@ fn check_loaded(session: &Session, report: &mut CheckReport) {
         );
     }
     target_findings(session, &frame, report);
+    super::check_marks::mark_findings(session, &frame, report);
 }
 
 fn plane_findings(session: &Session, frame: &WorldFrame, report: &mut CheckReport) {

@@ -10,7 +10,7 @@ use nalgebra::{Matrix2, Point2, Vector3};
 use super::calibration::{calibrate, Calibration};
 use super::centroid::CentroidError;
 use super::error::CalibrationError;
-use super::input::{CalibrationInput, FlatPixel, Target};
+use super::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
 use super::session::{Session, SessionError};
 use crate::acquire::acquisition::{Acquisition, AcquisitionError};
 use crate::optics::station::Station;
@@ -257,6 +257,14 @@ pub fn solve_session(
         element_points_stage_mm: session.element_points_mm.iter().map(v).collect(),
         targets,
         flat_screen,
+        screen_points: session
+            .screen_points
+            .iter()
+            .map(|m| MarkedPixel {
+                stage_mm: m.stage_mm.coords,
+                screen_px: m.screen_px,
+            })
+            .collect(),
     };
     let mut calibration = calibrate(&input)?;
     // The centroids' σ count the background's noise only (the session gives

@@ -33,6 +33,15 @@ pub struct FlatPixel {
     pub screen_cov_px2: Matrix2<f64>,
 }
 
+/// One marked screen pixel (`[[screen_point]]`): the PSM focused on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MarkedPixel {
+    /// Stage reading of the PSM's focus, mm (stage frame).
+    pub stage_mm: Vector3<f64>,
+    /// The mark's screen coordinate `(u, v)`, screen px (spec convention).
+    pub screen_px: Point2<f64>,
+}
+
 /// Everything one calibration session says, in the stage frame.
 #[derive(Debug, Clone)]
 pub struct CalibrationInput {
@@ -55,4 +64,6 @@ pub struct CalibrationInput {
     pub targets: Vec<Target>,
     /// The reference flat's decoded screen points.
     pub flat_screen: Vec<FlatPixel>,
+    /// The marked screen pixels the PSM was focused on (may be empty).
+    pub screen_points: Vec<MarkedPixel>,
 }

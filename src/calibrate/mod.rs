@@ -25,7 +25,8 @@
 //! - [`params`], [`residuals`], [`adjust`], [`resect`]: the unknowns (the
 //!   frame's plane, the station's degrees of freedom), the residual blocks
 //!   each against its own noise, one weighted adjustment with the choice of
-//!   what to estimate, the camera by resection.
+//!   what to estimate, the camera by resection; [`screen_mark`]: where
+//!   the PSM's focus stands on a marked screen pixel (cover glass).
 //! - [`calibration`]: [`calibration::calibrate`], the single entry point
 //!   (resection, screen, joint adjustment), and what it writes; [`report`].
 
@@ -33,6 +34,7 @@ pub mod adjust;
 pub mod calibration;
 pub mod centroid;
 pub mod check;
+mod check_marks;
 pub mod dlt;
 pub mod error;
 pub mod frame;
@@ -41,10 +43,12 @@ pub mod input;
 pub mod make;
 pub mod params;
 pub mod pictures;
+pub mod pictures_sensor;
 pub mod report;
 pub mod resect;
 pub mod residuals;
 mod rules;
+pub mod screen_mark;
 pub mod session;
 pub mod session_file;
 mod spot_background;

@@ -1,7 +1,9 @@
-//! The calibration report's pictures: each target's reprojection residual
-//! and the reference flat's fringe-map residual over the sensor, on the
-//! calibrated station — what an operator looks at to see whether a reading
-//! or a region of the flat disagrees with the rest.
+//! The calibration report's pictures: each target's reprojection residual,
+//! the reprojected targets on the sensor at each height
+//! ([`super::pictures_sensor`]), and the reference flat's fringe-map
+//! residual over the sensor in u and in v, on the calibrated station —
+//! what an operator looks at to see whether a reading or a region of the
+//! flat disagrees with the rest.
 
 use std::path::{Path, PathBuf};
 
@@ -29,10 +31,12 @@ pub fn target_residuals(cal: &Calibration, input: &CalibrationInput) -> Vec<[f64
         .collect()
 }
 
-/// Writes `targets.png` (residual x and y per target, px) and
-/// `flat_residuals.png` (each used flat pixel's `u` residual over its σ: a
-/// region or a pattern that stands out of the ±1 noise is a model error)
-/// into `dir`.
+/// Writes into `dir`: `targets.png` (residual x and y per target, px),
+/// `targets_on_sensor.png` (measured and reprojected targets with scaled
+/// residual arrows, a panel per height), `flat_residuals.png` and
+/// `flat_residuals_v.png` (each used flat pixel's `u`, `v` residual over
+/// its σ: a region or a pattern that stands out of the ±1 noise is a model
+/// error).
 ///
 /// # Errors
 /// [`PlotError`] naming the file that could not be written.
@@ -73,6 +77,23 @@ pub fn write_pictures(
             ],
         }],
     )?;
+    let sensor = dir.join("targets_on_sensor.png");
+    super::pictures_sensor::targets_on_sensor_png(cal, input, &sensor)?;
+    let u = dir.join("flat_residuals.png");
+    flat_map(cal, input, 0, &u)?;
+    let v = dir.join("flat_residuals_v.png");
+    flat_map(cal, input, 1, &v)?;
+    Ok(vec![targets, sensor, u, v])
+}
+
+/// The flat's residual over σ of coordinate `axis` (0: u, 1: v) over the
+/// sensor, written to `path`.
+fn flat_map(
+    cal: &Calibration,
+    input: &CalibrationInput,
+    axis: usize,
+    path: &Path,
+) -> Result<(), PlotError> {
     let cam = &cal.station.camera;
     // The flat's pixels may be a grid of every s-th pixel: cells of s.
     let grid = input
@@ -93,22 +114,26 @@ pub fn write_pictures(
         let Some(pred) = flat_reflection_uv(&cal.station, p.pixel[0], p.pixel[1]) else {
             continue;
         };
-        let e = (p.screen_px.x - pred.x) / p.screen_cov_px2[(0, 0)].sqrt();
+        let e = (p.screen_px[axis] - pred[axis]) / p.screen_cov_px2[(axis, axis)].sqrt();
         let k = (p.pixel[1] / cell) as usize * w + (p.pixel[0] / cell) as usize;
         map[k] = e;
     }
-    let flat = dir.join("flat_residuals.png");
+    let title = if axis == 0 {
+        "reference flat: (measured − calibrated) u / σ over the sensor"
+    } else {
+        "reference flat: (measured − calibrated) v / σ over the sensor"
+    };
     height_map(
-        &flat,
+        path,
         Format::Png,
         &HeightMap {
             values: &map,
             width: w,
             height: h,
-            title: "reference flat: (measured − calibrated) u / σ over the sensor",
+            title,
             unit: "σ",
             extent: None,
         },
     )?;
-    Ok(vec![targets, flat])
+    Ok(())
 }

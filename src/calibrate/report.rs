@@ -1,6 +1,8 @@
 //! The calibration's report: each step's residuals by block against the
 //! noise each block expects, χ²/dof, what was held and why, with the
-//! normal matrix's condition numbers. Serialised to `report.json` and
+//! normal matrix's condition numbers, and the readings that stand out of
+//! their noise (a marked screen pixel whose reading disagrees with the
+//! calibrated screen: a wrong reading). Serialised to `report.json` and
 //! printed as a short summary for the operator.
 
 use nalgebra::Matrix2;
@@ -9,11 +11,13 @@ use serde::Serialize;
 use super::adjust::{Adjusted, Selection};
 use super::input::CalibrationInput;
 use super::residuals::{raw, Blocks, Whitening};
+use super::spread::chi2_quantile_999;
 
 /// One residual block's figures at the end of a step.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BlockReport {
-    /// `flat_points`, `element_points`, `targets` or `flat_map`.
+    /// `flat_points`, `element_points`, `targets`, `flat_map` or
+    /// `screen_points`.
     pub name: &'static str,
     /// The unit of the RMS figures.
     pub unit: &'static str,
@@ -44,6 +48,71 @@ pub struct StepReport {
     pub selection: Selection,
     /// Its residual blocks.
     pub blocks: Vec<BlockReport>,
+    /// Readings whose whitened residual lies beyond χ²'s 99.9 % quantile
+    /// for its dimension, worst first. Only the last step's (the joint
+    /// adjustment's, against all the data) say that a reading is wrong:
+    /// an earlier step fits part of the station with the rest still rough.
+    pub suspects: Vec<Suspect>,
+}
+
+/// A reading that stands out of its noise.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Suspect {
+    /// The session entry, `screen_point[3]`.
+    pub entry: String,
+    /// Its residual's length, in the block's unit.
+    pub residual: f64,
+    /// Its whitened residual's squared length (χ² of the reading).
+    pub chi2: f64,
+    /// In the operator's words, with what to do.
+    pub message: String,
+}
+
+/// The marked screen pixels' block and its suspects: residuals in mm (the
+/// predicted focus against the reading, world frame), each against the
+/// stage noise and its focus spread (`w` the whiteners).
+fn screen_points(
+    e: &[nalgebra::Vector3<f64>],
+    w: &[nalgebra::Matrix3<f64>],
+) -> (BlockReport, Vec<Suspect>) {
+    let (r, _) = rms(e.iter().flat_map(|v| [v.x, v.y, v.z]));
+    let var: f64 = w
+        .iter()
+        .map(|l| l.try_inverse().map_or(f64::NAN, |c| c.norm_squared() / 3.0))
+        .sum();
+    let chi: Vec<f64> = e
+        .iter()
+        .zip(w)
+        .map(|(v, l)| (l * v).norm_squared())
+        .collect();
+    let limit = chi2_quantile_999(3.0);
+    let mut suspects: Vec<Suspect> = e
+        .iter()
+        .zip(&chi)
+        .enumerate()
+        .filter(|(_, (_, &c))| c > limit)
+        .map(|(k, (v, &c))| Suspect {
+            entry: format!("screen_point[{k}]"),
+            residual: v.norm(),
+            chi2: c,
+            message: format!(
+                "screen_point[{k}]: the reading is {:.4} mm from where the calibrated screen puts \
+                 the mark's focus (χ² {c:.1} over 3 axes, 99.9 % of readings stay below \
+                 {limit:.1}): wrong reading or wrong mark? Read it again",
+                v.norm()
+            ),
+        })
+        .collect();
+    suspects.sort_by(|a, b| b.chi2.total_cmp(&a.chi2));
+    let block = BlockReport {
+        name: "screen_points",
+        unit: "mm",
+        count: e.len(),
+        rms: r,
+        expected_rms: (var / e.len().max(1) as f64).sqrt(),
+        chi2: chi.iter().sum(),
+    };
+    (block, suspects)
 }
 
 /// The whole report.
@@ -93,6 +162,7 @@ impl StepReport {
         let w = Whitening::at(input, &a.state).ok();
         let s_um = input.stage_std_mm * 1000.0;
         let mut out = Vec::new();
+        let mut suspects = Vec::new();
         for (on, bname, v) in [
             (blocks.flat_points, "flat_points", &r.flat_points),
             (blocks.element_points, "element_points", &r.element_points),
@@ -116,6 +186,11 @@ impl StepReport {
             if blocks.flat_map {
                 out.push(block_2d("flat_map", "screen px", &r.flat_map, &w.flat_map));
             }
+            if blocks.screen_points && !r.screen_points.is_empty() {
+                let (b, s) = screen_points(&r.screen_points, &w.screen_points);
+                out.push(b);
+                suspects = s;
+            }
         }
         StepReport {
             name,
@@ -125,6 +200,7 @@ impl StepReport {
             chi2_per_dof: a.chi2 / a.dof.max(1) as f64,
             selection: a.selection.clone(),
             blocks: out,
+            suspects,
         }
     }
 }
@@ -154,6 +230,19 @@ impl Report {
                     .into(),
             );
         }
+        if !input.screen_points.is_empty() {
+            notes.push(format!(
+                "{} marked screen pixels: the PSM is taken to look along the stage's z axis{}",
+                input.screen_points.len(),
+                if input.nominal.screen.cover_glass.is_some() {
+                    "; through the cover glass its focus is taken midway between the mark's \
+                     sagittal and tangential images, their spread added to the stage noise \
+                     along its axis"
+                } else {
+                    ""
+                }
+            ));
+        }
         Report { steps, notes }
     }
 
@@ -165,7 +254,8 @@ impl Report {
     /// A short summary for the operator.
     pub fn summary(&self) -> String {
         let mut s = String::new();
-        for step in &self.steps {
+        let last = self.steps.len().saturating_sub(1);
+        for (k, step) in self.steps.iter().enumerate() {
             s += &format!(
                 "{:<10} χ²/dof {:.2} ({} dof, {} trials, condition {:.1e})\n",
                 step.name,
@@ -179,6 +269,11 @@ impl Report {
                     "  {:<15} {:>6} × RMS {:.4} {} (noise alone: {:.4})\n",
                     b.name, b.count, b.rms, b.unit, b.expected_rms
                 );
+            }
+            if k == last {
+                for x in &step.suspects {
+                    s += &format!("  suspect: {}\n", x.message);
+                }
             }
             for h in &step.selection.held {
                 s += &format!(

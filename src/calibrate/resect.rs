@@ -136,6 +136,7 @@ pub fn resect(input: &CalibrationInput, state: &State) -> Result<Adjusted, Calib
         element_points: false,
         targets: true,
         flat_map: false,
+        screen_points: false,
     };
     let mut start = state.clone();
     if let Some(cam) = linear_start(input, state) {
@@ -150,7 +151,7 @@ pub fn resect(input: &CalibrationInput, state: &State) -> Result<Adjusted, Calib
             start = dlt_state;
         }
     }
-    adjust(input, start, &camera_params(), blocks, "resection")
+    adjust(input, start, state, &camera_params(), blocks, "resection")
 }
 
 fn reprojection_ss(input: &CalibrationInput, state: &State) -> f64 {

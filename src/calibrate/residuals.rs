@@ -4,15 +4,20 @@
 //! (against each centroid's covariance plus the stage noise carried through
 //! the projection) and the reference flat's fringe map (the screen point
 //! the flat mirror at `z = 0` reflects each camera pixel's ray to, against
-//! the decoded one and its covariance). Whitened residuals are `L⁻¹ e`
+//! the decoded one and its covariance) and the marked screen pixels (the
+//! PSM's focus on each, predicted from the screen's pose and pitch
+//! ([`super::screen_mark`]), against the stage reading mapped into the
+//! world frame, in mm, against the stage noise and the focus's spread).
+//! Whitened residuals are `L⁻¹ e`
 //! with `L Lᵀ` the residual's covariance, so each is N(0, 1) at the truth.
 
-use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Unit, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix2x3, Matrix3, Point2, Point3, Unit, Vector2, Vector3};
 use rayon::prelude::*;
 
 use super::error::CalibrationError;
-use super::input::{CalibrationInput, FlatPixel, Target};
+use super::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
 use super::params::State;
+use super::screen_mark::{mark_focus, MarkFocus};
 use crate::optics::station::Station;
 
 /// Which residual blocks a step of the calibration fits.
@@ -26,6 +31,8 @@ pub struct Blocks {
     pub targets: bool,
     /// The reference flat's fringe map (the screen).
     pub flat_map: bool,
+    /// The marked screen pixels (the screen).
+    pub screen_points: bool,
 }
 
 impl Blocks {
@@ -35,6 +42,7 @@ impl Blocks {
         element_points: true,
         targets: true,
         flat_map: true,
+        screen_points: true,
     };
 }
 
@@ -46,6 +54,8 @@ pub struct Whitening {
     pub targets: Vec<Matrix2<f64>>,
     /// `L⁻¹` per flat pixel.
     pub flat_map: Vec<Matrix2<f64>>,
+    /// `L⁻¹` per marked screen pixel (3 × 3, world mm).
+    pub screen_points: Vec<Matrix3<f64>>,
 }
 
 /// Step of the projection's central differences over a world point, mm:
@@ -111,8 +121,42 @@ impl Whitening {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Whitening { targets, flat_map })
+        let s2_mark = Matrix3::identity() * s2;
+        let screen_points = input
+            .screen_points
+            .iter()
+            .enumerate()
+            .map(|(index, m)| {
+                let cov = s2_mark + mark(state, m).focus_cov_mm2;
+                cov.cholesky().and_then(|c| c.l().try_inverse()).ok_or(
+                    CalibrationError::BadCovariance {
+                        entry: "screen_point",
+                        index,
+                    },
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Whitening {
+            targets,
+            flat_map,
+            screen_points,
+        })
     }
+}
+
+/// The PSM's axis in the world frame: the stage's `z` (it focuses by
+/// moving along it), from the element towards the screen.
+pub fn psm_axis(state: &State) -> Unit<Vector3<f64>> {
+    Unit::new_normalize(state.frame.stage_from_world().inverse() * Vector3::z())
+}
+
+fn mark(state: &State, m: &MarkedPixel) -> MarkFocus {
+    mark_focus(
+        &state.station.screen,
+        &psm_axis(state),
+        m.screen_px.x,
+        m.screen_px.y,
+    )
 }
 
 /// The screen point `(u, v)` that the ray of camera pixel `(i, j)` reaches
@@ -159,6 +203,8 @@ pub struct Raw {
     pub targets: Vec<Vector2<f64>>,
     /// Predicted − decoded screen point per flat pixel.
     pub flat_map: Vec<Vector2<f64>>,
+    /// Predicted focus − stage reading (world) per marked pixel, mm.
+    pub screen_points: Vec<Vector3<f64>>,
 }
 
 fn flat_point(state: &State, p: &Vector3<f64>) -> f64 {
@@ -181,6 +227,10 @@ fn target(state: &State, t: &Target) -> Vector2<f64> {
 fn flat_pixel(state: &State, f: &FlatPixel) -> Vector2<f64> {
     flat_reflection_uv(&state.station, f.pixel[0], f.pixel[1])
         .map_or(Vector2::new(f64::NAN, f64::NAN), |p| p - f.screen_px)
+}
+
+fn screen_point(state: &State, m: &MarkedPixel) -> Vector3<f64> {
+    mark(state, m).world_mm - state.frame.to_world(&m.stage_mm)
 }
 
 /// The raw residuals of the blocks asked for (the others left empty).
@@ -211,28 +261,37 @@ pub fn raw(input: &CalibrationInput, state: &State, blocks: Blocks) -> Raw {
             .map(|f| flat_pixel(state, f))
             .collect();
     }
+    if blocks.screen_points {
+        out.screen_points = input
+            .screen_points
+            .iter()
+            .map(|m| screen_point(state, m))
+            .collect();
+    }
     out
 }
 
-/// The readings of the blocks asked for, each giving one or two residuals,
-/// in the order flat points, element points, targets, flat map.
+/// The readings of the blocks asked for, each giving one to three
+/// residuals, in the order flat points, element points, targets, flat map,
+/// screen points.
 pub fn item_count(input: &CalibrationInput, blocks: Blocks) -> usize {
     let on = |b: bool, n: usize| if b { n } else { 0 };
     on(blocks.flat_points, input.flat_points_stage_mm.len())
         + on(blocks.element_points, input.element_points_stage_mm.len())
         + on(blocks.targets, input.targets.len())
         + on(blocks.flat_map, input.flat_screen.len())
+        + on(blocks.screen_points, input.screen_points.len())
 }
 
 /// The whitened residuals of reading `k` ([`item_count`]'s order) and how
-/// many of the two it has.
+/// many of the three it has.
 pub fn item(
     input: &CalibrationInput,
     state: &State,
     blocks: Blocks,
     w: &Whitening,
     k: usize,
-) -> ([f64; 2], usize) {
+) -> ([f64; 3], usize) {
     let s = input.stage_std_mm;
     let mut k = k;
     let mut take = |on: bool, n: usize| {
@@ -248,7 +307,11 @@ pub fn item(
     };
     if let Some(i) = take(blocks.flat_points, input.flat_points_stage_mm.len()) {
         return (
-            [flat_point(state, &input.flat_points_stage_mm[i]) / s, 0.0],
+            [
+                flat_point(state, &input.flat_points_stage_mm[i]) / s,
+                0.0,
+                0.0,
+            ],
             1,
         );
     }
@@ -257,17 +320,22 @@ pub fn item(
             [
                 element_point(state, &input.element_points_stage_mm[i]) / s,
                 0.0,
+                0.0,
             ],
             1,
         );
     }
     if let Some(i) = take(blocks.targets, input.targets.len()) {
         let e = w.targets[i] * target(state, &input.targets[i]);
-        return ([e.x, e.y], 2);
+        return ([e.x, e.y, 0.0], 2);
     }
     if let Some(i) = take(blocks.flat_map, input.flat_screen.len()) {
         let e = w.flat_map[i] * flat_pixel(state, &input.flat_screen[i]);
-        return ([e.x, e.y], 2);
+        return ([e.x, e.y, 0.0], 2);
     }
-    ([f64::NAN; 2], 0)
+    if let Some(i) = take(blocks.screen_points, input.screen_points.len()) {
+        let e = w.screen_points[i] * screen_point(state, &input.screen_points[i]);
+        return ([e.x, e.y, e.z], 3);
+    }
+    ([f64::NAN; 3], 0)
 }

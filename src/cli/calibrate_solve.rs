@@ -19,12 +19,15 @@ pub struct SolveArgs {
     session: PathBuf,
     /// Where to write station.toml (mfd-station/2), station_uncertainty.toml
     /// (mfd-station-uncertainty/1), report.json and the pictures
-    /// (targets.png: each target's reprojection residual; flat_residuals.png:
-    /// the reference flat's fringe-map residual over the sensor).
+    /// (targets.png: each target's reprojection residual;
+    /// targets_on_sensor.png: measured and reprojected targets per height;
+    /// flat_residuals.png, flat_residuals_v.png: the reference flat's
+    /// fringe-map residual in u and v over the sensor).
     #[arg(long)]
     out: PathBuf,
     /// How the reference flat's acquisition is decoded (its display's gamma
-    /// for a phase-shifting schedule: --display-gamma or --display-profile).
+    /// or measured response for a phase-shifting schedule: --display-gamma
+    /// or --display-profile).
     #[command(flatten)]
     spectral: super::SpectralArgs,
 }
@@ -52,7 +55,7 @@ pub fn solve(args: &SolveArgs) -> anyhow::Result<()> {
     mfd::calibrate::pictures::write_pictures(&solved.calibration, &solved.input, &args.out)?;
     println!(
         "wrote {}/station.toml, station_uncertainty.toml, report.json, targets.png, \
-         flat_residuals.png; measure with \
+         targets_on_sensor.png, flat_residuals.png, flat_residuals_v.png; measure with \
          `mfd reconstruct ACQ --station {0}/station.toml --uncertainty {0}/station_uncertainty.toml`",
         args.out.display()
     );
@@ -72,6 +75,10 @@ pub struct SimulateArgs {
     /// 1σ of a stage reading, µm.
     #[arg(long, value_parser = super::check::positive, default_value_t = 1.0)]
     stage_std_um: f64,
+    /// Marked screen pixels (`[[screen_point]]`) on an N × N grid over the
+    /// screen, read with the stage's noise; 0: none.
+    #[arg(long, default_value_t = 0)]
+    screen_points: u32,
     /// The display's gamma for the flat's phase-shifting frames.
     #[arg(long, value_parser = super::check::gamma, default_value_t = 2.0)]
     display_gamma: f64,
@@ -95,6 +102,7 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let spec = SessionSpec {
         seed: args.seed,
         stage_std_mm: args.stage_std_um * 1e-3,
+        screen_points: [args.screen_points; 2],
         ..SessionSpec::default()
     };
     let session = simulate_session(&truth, &spec)?;

@@ -78,16 +78,26 @@ pub struct SpectralArgs {
     /// it (or --display-profile) the display is taken as linearised.
     #[arg(long, value_parser = self::check::gamma, conflicts_with = "display_profile")]
     display_gamma: Option<f64>,
-    /// The display profile (`hw/display/*.toml`) whose `gamma` is modelled,
-    /// as --display-gamma.
-    #[arg(long, value_parser = profile_gamma, value_name = "TOML")]
-    display_profile: Option<f64>,
+    /// The display profile (`hw/display/*.toml`) whose measured `response`
+    /// (where it has one) or `gamma` is modelled, as --display-gamma.
+    #[arg(long, value_parser = profile_response, value_name = "TOML")]
+    display_profile: Option<ProfileResponse>,
 }
 
-/// The `gamma` of a display profile file.
-fn profile_gamma(path: &str) -> Result<f64, String> {
-    mfd::optics::station::DisplayProfile::load(Path::new(path))
-        .map(|p| p.gamma)
+/// What a display profile says of the display's response.
+#[derive(Debug, Clone)]
+pub struct ProfileResponse {
+    gamma: f64,
+    curve: Option<mfd::solve::spectral::phase::ResponseCurve>,
+}
+
+/// The `gamma` and `response` of a display profile file.
+fn profile_response(path: &str) -> Result<ProfileResponse, String> {
+    mfd::solve::spectral::phase::profile_response(Path::new(path))
+        .map(|(p, curve)| ProfileResponse {
+            gamma: p.gamma,
+            curve,
+        })
         .map_err(|e| e.to_string())
 }
 
@@ -98,7 +108,10 @@ impl SpectralArgs {
             engine: self.engine,
             band_bins: self.band_bins,
             warm_starts: !self.search_every_pixel,
-            display_gamma: self.display_gamma.or(self.display_profile),
+            display_gamma: self
+                .display_gamma
+                .or(self.display_profile.as_ref().map(|p| p.gamma)),
+            display_response: self.display_profile.as_ref().and_then(|p| p.curve.clone()),
             ..mfd::solve::spectral::SpectralConfig::default()
         }
     }

@@ -144,6 +144,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         Some(gamma) => {
             let phase = PhaseShiftParams {
                 gamma,
+                luminance: None,
                 tau_max: args.tau_max,
                 falloff_per_period: Vec::new(),
                 ambient: args.ambient,

@@ -30,11 +30,29 @@ const HARMONICS: usize = 16;
 /// Samples of the response curve per period for its DFT.
 const CURVE_SAMPLES: usize = 1024;
 
+/// A display's emitted luminance of drive level `g ∈ [0, 1]` (1 at full
+/// drive), by name (settings compare by it).
+#[derive(Debug, Clone, Copy)]
+pub struct Luminance {
+    /// What the curve is.
+    pub name: &'static str,
+    /// The curve.
+    pub at: fn(f64) -> f64,
+}
+
+impl PartialEq for Luminance {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name
+    }
+}
+
 /// The simulated acquisition's settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PhaseShiftParams {
     /// Display gamma: emitted luminance ∝ g^γ.
     pub gamma: f64,
+    /// A display response that is no power law, used in place of `g^γ`.
+    pub luminance: Option<Luminance>,
     /// Gaussian part of the camera blur: a fringe of τ_max periods per
     /// screen keeps 1/e of its contrast.
     pub tau_max: f64,
@@ -60,6 +78,7 @@ impl Default for PhaseShiftParams {
     fn default() -> Self {
         PhaseShiftParams {
             gamma: 2.0,
+            luminance: None,
             tau_max: 200.0,
             falloff_per_period: vec![(45.0, 0.002), (-45.0, 0.009)],
             ambient: 0.05,
@@ -145,7 +164,10 @@ impl PhaseShiftRenderer {
             return bad("station", "no camera pixel sees the mirror".into());
         }
         let fs = f64::from((1u32 << params.bit_depth) - 1);
-        let coeffs = curve_harmonics(params.gamma);
+        let coeffs = match params.luminance {
+            Some(l) => harmonics_of(l.at),
+            None => curve_harmonics(params.gamma),
+        };
         Ok(PhaseShiftRenderer {
             gain: 0.9 * fs / brightest,
             width: view.width,
@@ -228,9 +250,14 @@ impl PhaseShiftRenderer {
 
 /// `c_0 … c_HARMONICS` of `(0.5 + 0.5 cos x)^γ = c_0 + Σ c_n cos(n x)`.
 fn curve_harmonics(gamma: f64) -> Vec<f64> {
+    harmonics_of(|g| g.powf(gamma))
+}
+
+/// `c_0 … c_HARMONICS` of `L(0.5 + 0.5 cos x) = c_0 + Σ c_n cos(n x)`.
+fn harmonics_of(lum: impl Fn(f64) -> f64) -> Vec<f64> {
     let m = CURVE_SAMPLES;
     let curve: Vec<f64> = (0..m)
-        .map(|j| (0.5 + 0.5 * (std::f64::consts::TAU * j as f64 / m as f64).cos()).powf(gamma))
+        .map(|j| lum(0.5 + 0.5 * (std::f64::consts::TAU * j as f64 / m as f64).cos()))
         .collect();
     (0..=HARMONICS)
         .map(|n| {

@@ -10,15 +10,17 @@
 use std::path::Path;
 
 use nalgebra::{Matrix2, Point2, Point3, Vector3};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 use super::SimError;
-use crate::calibrate::input::{CalibrationInput, FlatPixel, Target};
+use crate::calibrate::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
 use crate::calibrate::params::{prior, WorldFrame, COVER_GLASS_PRIOR_MM};
+use crate::calibrate::screen_mark::mark_focus;
 use crate::calibrate::session_file::{
-    ReferenceFlat, SessionElement, SessionFile, StagePoint, TargetPoint, SESSION_FORMAT,
+    ReferenceFlat, ScreenPoint, SessionElement, SessionFile, StagePoint, TargetPoint,
+    SESSION_FORMAT,
 };
 use crate::formats::image_io::write_png;
 use crate::optics::refraction::reflect;
@@ -50,12 +52,16 @@ pub struct SessionSpec {
     pub plane: [f64; 3],
     /// Stage x, y of the element's centre, mm.
     pub center_stage_mm: [f64; 2],
+    /// Marked screen pixels the PSM is focused on (`[[screen_point]]`),
+    /// columns × rows over the screen; `[0, 0]`: none.
+    pub screen_points: [u32; 2],
 }
 
 impl Default for SessionSpec {
     /// 1 µm stage, 0.05 px centroids, 0.02 px flat decode; targets 5 × 4 at
     /// 0, 60 and 120 mm; a Ø 150 mm flat sampled 40 × 30; 6 element points;
-    /// the stage tilted by about 0.3° and shifted by a hundred millimetres.
+    /// the stage tilted by about 0.3° and shifted by a hundred millimetres;
+    /// no marked screen pixels.
     fn default() -> Self {
         SessionSpec {
             seed: 1,
@@ -69,6 +75,7 @@ impl Default for SessionSpec {
             element_points: 6,
             plane: [12.3456, 0.004, -0.003],
             center_stage_mm: [102.4, 87.9],
+            screen_points: [0, 0],
         }
     }
 }
@@ -200,6 +207,40 @@ fn flat_screen(
     out
 }
 
+/// The PSM focused on a grid of marked screen pixels (pixel centres,
+/// 5 % to 95 % of the screen): the truth's focus ([`mark_focus`], the PSM
+/// along the stage's z), its best focus drawn uniformly between the
+/// mark's two images as the model says, then the stage's noise.
+fn screen_marks(
+    truth: &Station,
+    frame: &WorldFrame,
+    spec: &SessionSpec,
+    rng: &mut Xoshiro256PlusPlus,
+) -> Vec<MarkedPixel> {
+    let [nx, ny] = spec.screen_points;
+    let screen = &truth.screen;
+    let axis = nalgebra::Unit::new_normalize(frame.stage_from_world().inverse() * Vector3::z());
+    let mut out = Vec::new();
+    for r in 0..ny {
+        for c in 0..nx {
+            let at = |k: u32, n: u32, size: u32| {
+                let f = 0.05 + 0.9 * (f64::from(k) + 0.5) / f64::from(n);
+                (f * f64::from(size)).floor() + 0.5
+            };
+            let (u, v) = (at(c, nx, screen.width), at(r, ny, screen.height));
+            let f = mark_focus(screen, &axis, u, v);
+            let spread = (12.0 * f.focus_cov_mm2.trace()).sqrt();
+            let along: f64 = rng.random::<f64>() - 0.5;
+            let focus = f.world_mm - along * spread * axis.into_inner();
+            out.push(MarkedPixel {
+                stage_mm: noisy(rng, frame.to_stage(&focus), spec.stage_std_mm),
+                screen_px: Point2::new(u, v),
+            });
+        }
+    }
+    out
+}
+
 /// The truth perturbed by [`NOMINAL_ERRORS`], the lens undistorted but
 /// for k3, the element on the reference plane.
 fn nominal(truth: &Station, rng: &mut Xoshiro256PlusPlus) -> Station {
@@ -287,8 +328,11 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
         ));
     }
     let e = &truth.element;
+    let nominal = nominal(&truth, &mut rng);
+    // Drawn last, so that a session without them is the one it always was.
+    let screen_points = screen_marks(&truth, &frame, spec, &mut rng);
     let input = CalibrationInput {
-        nominal: nominal(&truth, &mut rng),
+        nominal,
         stage_std_mm: sd,
         element_center_stage_mm: spec.center_stage_mm,
         thickness_mm: (e.thickness_mm, 0.002),
@@ -297,6 +341,7 @@ pub fn simulate_session(truth: &Station, spec: &SessionSpec) -> Result<Simulated
         element_points_stage_mm: element_points,
         targets,
         flat_screen: flat,
+        screen_points,
     };
     Ok(SimulatedSession {
         input,
@@ -375,7 +420,14 @@ pub fn write_session(session: &SimulatedSession, dir: &Path) -> Result<(), SimEr
         flat_point: points(&input.flat_points_stage_mm),
         element_point: points(&input.element_points_stage_mm),
         target_point,
-        screen_point: Vec::new(),
+        screen_point: input
+            .screen_points
+            .iter()
+            .map(|m| ScreenPoint {
+                stage_mm: m.stage_mm.into(),
+                screen_px: m.screen_px.into(),
+            })
+            .collect(),
         reference_flat: ReferenceFlat {
             acquisition: "flat/acquisition.toml".into(),
             flat_pv_nm: 63.0,
@@ -421,6 +473,7 @@ pub fn example_truth() -> Result<Station, StationError> {
         gamma: 2.2,
         settle_ms: 30.0,
         cover_glass: None,
+        response: None,
     };
     let mut s = layout.build(&camera, &display)?;
     s.camera.distortion = Some(Distortion {

@@ -74,3 +74,47 @@ fn the_simulated_readings_carry_the_stated_noise() {
         xs.iter().copied().fold(f64::MIN, f64::max) - xs.iter().copied().fold(f64::MAX, f64::min);
     assert!(spread > 0.8 * f64::from(truth.camera.width));
 }
+
+#[test]
+fn screen_points_reach_the_session_file_and_read_back() {
+    // A session with marks writes `[[screen_point]]` entries that the
+    // session reader takes; the same seed without marks is the session it
+    // always was (the marks are drawn last).
+    let truth = example_truth().unwrap();
+    let spec = SessionSpec {
+        targets_grid: [3, 2],
+        screen_points: [3, 2],
+        ..SessionSpec::default()
+    };
+    let sim = simulate_session(&truth, &spec).unwrap();
+    let plain = simulate_session(
+        &truth,
+        &SessionSpec {
+            screen_points: [0, 0],
+            ..spec.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(sim.input.targets, plain.input.targets);
+    assert_eq!(sim.input.screen_points.len(), 6);
+    assert!(plain.input.screen_points.is_empty());
+    let dir = tempfile::tempdir().unwrap();
+    write_session(&sim, dir.path()).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("session.toml")).unwrap();
+    let file: SessionFile = toml::from_str(&text).unwrap();
+    assert_eq!(file.screen_point.len(), 6);
+    for (m, f) in sim.input.screen_points.iter().zip(&file.screen_point) {
+        assert_eq!(f.screen_px, [m.screen_px.x, m.screen_px.y]);
+        // Each reading is the mark's focus to the stage noise: within
+        // 5 σ of 1 µm plus the focus spread (tens of µm) of the true one.
+        let focus = crate::calibrate::screen_mark::mark_focus(
+            &truth.screen,
+            &nalgebra::Unit::new_normalize(sim.frame.stage_from_world().inverse() * Vector3::z()),
+            m.screen_px.x,
+            m.screen_px.y,
+        );
+        let spread = (12.0 * focus.focus_cov_mm2.trace()).sqrt();
+        let off = (sim.frame.to_world(&Vector3::from(f.stage_mm)) - focus.world_mm).norm();
+        assert!(off < 0.5 * spread + 5e-3, "{off} mm");
+    }
+}

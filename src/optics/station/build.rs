@@ -58,6 +58,12 @@ pub struct DisplayProfile {
     /// `mfd-station/2`'s `[screen.cover_glass]` (optional).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cover_glass: Option<CoverGlassFile>,
+    /// `response = [[level, luminance], …]`: the measured response
+    /// (optional), two values a row; the phase-shifting decode models it in
+    /// place of `gamma` (`crate::solve::spectral::phase::ResponseCurve`
+    /// checks it monotone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub response: Option<Vec<Vec<f64>>>,
 }
 
 fn load_profile<T: serde::de::DeserializeOwned>(
@@ -137,6 +143,17 @@ impl DisplayProfile {
         if !(0.5..=5.0).contains(&p.gamma) {
             return bad("gamma", format!("expected 0.5 to 5, found {}", p.gamma));
         }
+        if let Some(rows) = &p.response {
+            if let Some((k, r)) = rows.iter().enumerate().find(|(_, r)| r.len() != 2) {
+                return bad(
+                    "response",
+                    format!(
+                        "row {k}: expected [level, luminance], found {} values",
+                        r.len()
+                    ),
+                );
+            }
+        }
         // An LCD settles in a few to ~100 ms; 10 s is no display's.
         if !(0.0..=10_000.0).contains(&p.settle_ms) {
             return bad(
@@ -197,6 +214,7 @@ pub fn bench_station(
         gamma: 2.2,
         settle_ms: 30.0,
         cover_glass: None,
+        response: None,
     };
     let element = Element {
         refractive_index: index,

@@ -127,6 +127,9 @@ pub struct SpectralConfig {
     /// ([`super::phase`]); `None`: a linearised display (γ = 1). Long
     /// multi-frequency schedules do not use it.
     pub display_gamma: Option<f64>,
+    /// The display's measured response (a display profile's `response`),
+    /// modelled on phase-shifting schedules in place of `display_gamma`.
+    pub display_response: Option<super::phase::ResponseCurve>,
 }
 
 impl Default for SpectralConfig {
@@ -143,6 +146,7 @@ impl Default for SpectralConfig {
             warm_starts: true,
             roi: None,
             display_gamma: None,
+            display_response: None,
         }
     }
 }

@@ -124,7 +124,10 @@ impl SpectralSolver {
             });
         }
         let phase = match PhaseSchedule::detect(&design) {
-            Some(s) => Some((s, Response::new(config.display_gamma.unwrap_or(1.0))?)),
+            Some(s) => Some((
+                s,
+                Response::of(config.display_gamma, config.display_response.as_ref())?,
+            )),
             None => None,
         };
         let plans = SpectrumPlans::new(&design);

@@ -52,10 +52,12 @@
 //!    amplitudes' joint significance `Σ B²/σ_B²` must reach
 //!    [`DETECTION_CHI2`].
 
+pub mod curve;
 pub mod model;
 mod solve;
 pub mod unwrap;
 
+pub use curve::{profile_response, CurveError, ProfileResponseError, ResponseCurve};
 pub use model::{PhaseFit, PhaseModel, PhaseParams};
 pub use solve::NoiseLaw;
 pub(super) use solve::{solve_all, PhaseSettings};
@@ -173,19 +175,20 @@ pub(crate) fn distinct_phases(design: &Design, frames: &[u32]) -> usize {
 /// so the error falls as `M^−(2γ+1)`, ~10⁻¹³ at γ = 2).
 const RESPONSE_SAMPLES: usize = 4096;
 
-/// Harmonics kept: up to this many, while `c_n / c_1` exceeds
+/// Harmonics kept: up to this many, to the last whose `c_n / c_1` exceeds
 /// [`HARMONIC_FLOOR`].
 const MAX_HARMONICS: usize = 12;
 
 /// Smallest harmonic ratio kept (far below 8-bit quantisation, 1/255).
 const HARMONIC_FLOOR: f64 = 1e-7;
 
-/// The display's response, emitted luminance `∝ g^γ` of the pattern's
-/// `g = 0.5 + 0.5 cos x`, as harmonics: `g^γ = c_0 + Σ_n c_n cos(n x)`.
+/// The display's response, emitted luminance `L(g)` of the pattern's
+/// `g = 0.5 + 0.5 cos x` (`g^γ`, or a measured curve), as harmonics:
+/// `L(g) = c_0 + Σ_n c_n cos(n x)`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Response {
-    /// γ.
-    pub gamma: f64,
+    /// γ where the response is a power law; `None` for a measured curve.
+    pub gamma: Option<f64>,
     /// `c_n / c_1` for n = 1, 2, …: the first is 1.
     pub ratios: Vec<f64>,
 }
@@ -204,37 +207,69 @@ impl Response {
                 ),
             });
         }
-        let m = RESPONSE_SAMPLES;
-        let curve: Vec<f64> = (0..m)
-            .map(|j| {
-                let x = std::f64::consts::TAU * j as f64 / m as f64;
-                (0.5 + 0.5 * x.cos()).max(0.0).powf(gamma)
-            })
-            .collect();
-        let coeff = |n: usize| {
-            let sum: f64 = curve
-                .iter()
-                .enumerate()
-                .map(|(j, g)| g * (std::f64::consts::TAU * (n * j) as f64 / m as f64).cos())
-                .sum();
-            2.0 * sum / m as f64
-        };
-        let c1 = coeff(1);
-        let mut ratios = vec![1.0];
-        for n in 2..=MAX_HARMONICS {
-            let r = coeff(n) / c1;
-            if r.abs() < HARMONIC_FLOOR {
-                break;
-            }
-            ratios.push(r);
+        Ok(Response {
+            gamma: Some(gamma),
+            ratios: harmonic_ratios(|g| g.max(0.0).powf(gamma)),
+        })
+    }
+
+    /// A display of measured response `curve` (its interpolant sampled
+    /// [`RESPONSE_SAMPLES`] times a period).
+    pub fn from_curve(curve: &ResponseCurve) -> Self {
+        Response {
+            gamma: None,
+            ratios: harmonic_ratios(|g| curve.at(g)),
         }
-        Ok(Response { gamma, ratios })
+    }
+
+    /// The response a configuration states: its measured curve where it
+    /// has one, else its gamma (1: linearised).
+    ///
+    /// # Errors
+    /// As [`Response::new`].
+    pub fn of(gamma: Option<f64>, curve: Option<&ResponseCurve>) -> Result<Self, SpectralError> {
+        match curve {
+            Some(c) => Ok(Response::from_curve(c)),
+            None => Response::new(gamma.unwrap_or(1.0)),
+        }
     }
 
     /// Harmonics modelled (1: a pure cosine).
     pub fn harmonics(&self) -> usize {
         self.ratios.len()
     }
+}
+
+/// `c_n / c_1` of `L(0.5 + 0.5 cos x) = c_0 + Σ c_n cos(n x)`, n = 1 … up to
+/// [`MAX_HARMONICS`] while above [`HARMONIC_FLOOR`] (a DFT of the curve
+/// sampled [`RESPONSE_SAMPLES`] times a period).
+fn harmonic_ratios(lum: impl Fn(f64) -> f64) -> Vec<f64> {
+    let m = RESPONSE_SAMPLES;
+    let curve: Vec<f64> = (0..m)
+        .map(|j| {
+            let x = std::f64::consts::TAU * j as f64 / m as f64;
+            lum(0.5 + 0.5 * x.cos())
+        })
+        .collect();
+    let coeff = |n: usize| {
+        let sum: f64 = curve
+            .iter()
+            .enumerate()
+            .map(|(j, g)| g * (std::f64::consts::TAU * (n * j) as f64 / m as f64).cos())
+            .sum();
+        2.0 * sum / m as f64
+    };
+    let c1 = coeff(1);
+    let mut ratios: Vec<f64> = (1..=MAX_HARMONICS).map(|n| coeff(n) / c1).collect();
+    // Up to the last harmonic above the floor: a measured curve's ratios
+    // may pass through zero and rise again (a power law's fall steadily,
+    // and γ = 2's vanish from n = 3 on).
+    let keep = ratios
+        .iter()
+        .rposition(|r| r.abs() >= HARMONIC_FLOOR)
+        .map_or(1, |k| k + 1);
+    ratios.truncate(keep);
+    ratios
 }
 
 #[cfg(test)]
