@@ -309,8 +309,10 @@ struct Views {
 /// grid, 2 τ_max, last).
 const START_LADDERS: [f64; 4] = [0.5, 0.75, 1.0, 2.0];
 
-/// Bisection steps of the start component's share: 1/64.
-const BISECTIONS: usize = 6;
+/// The start component's share is searched on a grid of 1/`GRID`, then
+/// by `BISECTIONS` halvings below the first admissible one: to 1/32.
+const GRID: usize = 8;
+const BISECTIONS: usize = 2;
 
 /// Whether a rounded schedule meets the constraints: the spectral stage,
 /// run on sample pixels at the planned noise, finds the true points
@@ -397,12 +399,22 @@ fn design_frames(
             log::debug!("design of {n} frames: trying share {alpha} of uniform τ ≤ {tau_u}");
             round(&prob.candidates, &mix(alpha), n)
         };
-        let (mut lo, mut hi) = (0.0, 1.0);
-        if admissible(station, &at(0.0), opts, views)? {
-            hi = 0.0;
-        } else if !admissible(station, &at(1.0), opts, views)? {
+        // The smallest admissible share on a grid of 1/8 (admissibility
+        // need not be monotone in α: a short ladder alone separates
+        // nothing, mixed with w* it may), then bisection below it.
+        let mut first = None;
+        for k in 0..=GRID {
+            let alpha = k as f64 / GRID as f64;
+            if admissible(station, &at(alpha), opts, views)? {
+                first = Some(alpha);
+                break;
+            }
+        }
+        let Some(mut hi) = first else {
             continue;
-        } else {
+        };
+        let mut lo = (hi - 1.0 / GRID as f64).max(0.0);
+        if hi > 0.0 {
             for _ in 0..BISECTIONS {
                 let mid = 0.5 * (lo + hi);
                 if admissible(station, &at(mid), opts, views)? {
