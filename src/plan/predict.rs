@@ -208,7 +208,7 @@ pub fn run_stage(
 
 /// The noise draws of the stage's check: fixed, so that a plan is the
 /// same every time it is made.
-pub const STAGE_SEED: u64 = 0x5eed_17;
+pub const STAGE_SEED: u64 = 0x005e_ed17;
 
 /// Sample pixels the stage is run on by [`predict`].
 pub const STAGE_PIXELS: usize = 64;
