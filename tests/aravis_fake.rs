@@ -178,3 +178,71 @@ fn measure_over_the_fake_camera_reconstructs() {
     let acq = Acquisition::open(&dir.path().join("acquisition")).unwrap();
     assert_eq!(acq.complete_frames(), 60);
 }
+
+#[test]
+fn measure_shows_a_designed_schedule_over_the_fake_camera() {
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let st = common::public_small()
+        .join("station.toml")
+        .display()
+        .to_string();
+    // A short designed schedule: non-uniform τ with repeats, which the
+    // uniform flags cannot express.
+    let sched = dir.path().join("schedule.toml");
+    let plan = common::mfd(&[
+        "plan",
+        "--station",
+        &st,
+        "--frames",
+        "80",
+        "--out",
+        sched.to_str().unwrap(),
+    ]);
+    assert!(
+        plan.status.success(),
+        "{}",
+        String::from_utf8_lossy(&plan.stderr)
+    );
+    let want = mfd::acquire::schedule_file::load(&sched).unwrap().frames();
+    assert_eq!(want.len(), 80);
+    let out = dir.path().join("meas");
+    let run = common::mfd(&[
+        "measure",
+        "--station",
+        &st,
+        "--camera",
+        "aravis:fake",
+        "--schedule",
+        sched.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--frame-rate",
+        "100",
+        "--exposure-us",
+        "500",
+        // As above: the acquisition path is what this tests, not the
+        // fake camera's points.
+        "--no-surfaces",
+        "--accept-inconsistent",
+    ]);
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "{log}");
+    assert!(log.contains("captured 80 frames"), "{log}");
+    // The recorder wrote exactly the schedule, in its order.
+    let acq = Acquisition::open(&out.join("acquisition")).unwrap();
+    assert_eq!(acq.complete_frames(), want.len());
+    let rec = acq.frames().to_vec();
+    assert_eq!(rec.len(), want.len());
+    for (k, (a, b)) in rec.iter().zip(&want).enumerate() {
+        assert_eq!(
+            (a.direction_deg, a.tau, a.phase_rad),
+            (b.direction_deg, b.tau, b.phase_rad),
+            "frame {k}"
+        );
+    }
+}

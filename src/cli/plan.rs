@@ -84,6 +84,15 @@ pub struct PlanArgs {
     /// The camera's largest frame rate, Hz.
     #[arg(long, value_parser = super::check::positive, default_value_t = 30.0)]
     camera_rate_hz: f64,
+    /// The spectral stage's engine the schedule will be reconstructed with
+    /// (as `mfd reconstruct --engine`): the planner runs that stage on
+    /// sample pixels (auto: statistics when the series would exceed 2 GiB).
+    #[arg(long, value_enum, default_value_t = mfd::solve::spectral::Engine::Auto, hide_possible_values = true)]
+    engine: mfd::solve::spectral::Engine,
+    /// The statistics engine's band, Fourier bins beyond the predicted
+    /// points (as `mfd reconstruct --band-bins`).
+    #[arg(long, value_parser = super::check::positive, default_value_t = 3.0)]
+    band_bins: f64,
     /// Largest candidate τ of a design (default 2 τ_max).
     #[arg(long, value_parser = super::check::positive)]
     tau_hi: Option<f64>,
@@ -140,6 +149,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             let extra = serde_json::json!({
                 "design": {
                     "uniform_share": d.uniform_share,
+                    "start_tau_max": d.start_tau_max,
                     "efficiency": d.efficiency,
                     "criterion_px2": d.criterion_px2,
                     "distinct_taus": distinct_taus(&d.frames),
@@ -198,6 +208,11 @@ fn plan_options(args: &PlanArgs) -> anyhow::Result<PlanOptions> {
             ..timing
         },
         bound_stride_px: None,
+        spectral: mfd::solve::spectral::SpectralConfig {
+            engine: args.engine,
+            band_bins: args.band_bins,
+            ..mfd::solve::spectral::SpectralConfig::default()
+        },
     };
     anyhow::ensure!(
         [8, 12, 16].contains(&args.bit_depth),
@@ -263,4 +278,14 @@ fn print_summary(p: &Prediction) {
         },
         100.0 * a.start_found_fraction
     );
+    let st = &p.stage;
+    println!(
+        "spectral stage ({} engine) on {} sample pixels at this noise: true points found on {:.0} %",
+        st.engine,
+        st.pixels,
+        100.0 * st.found_fraction
+    );
+    if let Some(why) = &p.not_measurable_because {
+        println!("NOT MEASURABLE: {why}");
+    }
 }

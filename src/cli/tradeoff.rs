@@ -55,6 +55,10 @@ pub struct TradeoffArgs {
     /// limit; its note gives the predicted bound and the acquisition time.
     #[arg(long)]
     designed: bool,
+    /// Noise seeds of each designed row (the surfaces stay those of
+    /// --seed): the achieved error is the RMS over them; default: --seed.
+    #[arg(long, value_delimiter = ',')]
+    seeds: Vec<u64>,
 }
 
 /// One grid point's outcome.
@@ -68,6 +72,14 @@ struct Row {
     spectral_s: f64,
     surfaces_s: f64,
     note: String,
+    /// Acquisition time at the planner's default timing, s.
+    acquisition_s: f64,
+    /// The planner's predicted bound, nm (NaN where not measured).
+    predicted_nm: [f64; 2],
+    /// A designed schedule (not the uniform family).
+    designed: bool,
+    /// The planner's verdict: the spectral stage measures this schedule.
+    measurable: bool,
 }
 
 /// Runs `mfd tradeoff`.
@@ -87,19 +99,36 @@ pub fn run(args: &TradeoffArgs) -> anyhow::Result<()> {
         &Plate::new(&station, front.clone(), back.clone(), 3.0),
     );
     let mut rows = Vec::new();
+    let mut popts = mfd::plan::PlanOptions::default();
+    popts.radiometry.noise_frac = args.noise;
     for &n in &args.frames {
+        let frames = FrameInfo::from_patterns(&uniform(n).patterns());
+        let acquisition_s = popts.timing.seconds(&frames);
         for &it in &args.max_iter {
             let t = Instant::now();
             let maps = spectral(&station, &view, n, it, args)?;
             let spectral_s = t.elapsed().as_secs_f64();
             for &terms in &args.terms {
-                rows.push(surfaces(
+                let mut row =
+                    surfaces(&station, &maps, (&front, &back), (n, terms, it), spectral_s);
+                row.acquisition_s = acquisition_s;
+                let p = mfd::plan::predict(
                     &station,
-                    &maps,
-                    (&front, &back),
-                    (n, terms, it),
-                    spectral_s,
-                ));
+                    &frames,
+                    &mfd::plan::PlanOptions {
+                        terms,
+                        ..popts.clone()
+                    },
+                )?;
+                row.predicted_nm = [
+                    p.front.rms_nm,
+                    p.back.as_ref().map_or(f64::NAN, |b| b.rms_nm),
+                ];
+                row.measurable = p.not_measurable_because.is_none();
+                if !row.measurable {
+                    row.note = format!("PLANNER: not measurable; {}", row.note);
+                }
+                rows.push(row);
                 let r = rows.last().expect("just pushed");
                 eprintln!(
                     "frames/dir {n}, terms {terms}, max_iter {it}: front {:.2} nm, back {:.2} nm, {:.1} s {}",
@@ -126,50 +155,113 @@ fn designed_rows(
     let it = args.max_iter.iter().copied().max().unwrap_or(30);
     let mut opts = mfd::plan::DesignOptions::default();
     opts.plan.radiometry.noise_frac = args.noise;
+    opts.plan.terms = terms;
+    let seeds = if args.seeds.is_empty() {
+        vec![args.seed]
+    } else {
+        args.seeds.clone()
+    };
     for &n in &args.frames {
         let t = Instant::now();
         let d = mfd::plan::design(station, mfd::plan::Budget::Frames(2 * n), &opts)?;
         let design_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let maps = solve_frames(
-            station,
-            view,
-            &d.frames,
-            it,
-            args.noise,
-            args.seed + n as u64,
-        )?;
-        let mut row = surfaces(
-            station,
-            &maps,
-            truth,
-            (n, terms, it),
-            t.elapsed().as_secs_f64(),
-        );
+        let mut per_seed = Vec::new();
+        for &seed in &seeds {
+            let t = Instant::now();
+            let maps = solve_frames(station, view, &d.frames, it, args.noise, seed + n as u64)?;
+            let row = surfaces(
+                station,
+                &maps,
+                truth,
+                (n, terms, it),
+                t.elapsed().as_secs_f64(),
+            );
+            eprintln!(
+                "designed {} frames, noise seed {}: front {:.2} nm, back {:.2} nm {}",
+                2 * n,
+                seed + n as u64,
+                row.error_nm[0],
+                row.error_nm[1],
+                row.note
+            );
+            per_seed.push(row);
+        }
+        let mut row = combine(&per_seed);
         let p = &d.prediction;
+        row.acquisition_s = p.seconds;
+        row.designed = true;
+        row.measurable = p.not_measurable_because.is_none();
+        row.predicted_nm = [
+            p.front.rms_nm,
+            p.back.as_ref().map_or(f64::NAN, |b| b.rms_nm),
+        ];
+        let ratio = |k: usize| row.error_nm[k] / row.predicted_nm[k];
+        let spread = |s: Option<&mfd::plan::SurfacePrediction>| {
+            s.map_or(f64::NAN, |s| 100.0 * s.rms_relative_spread(per_seed.len()))
+        };
         row.note = format!(
-            "designed (plan {design_s:.1} s): predicted {:.2} / {} nm, acquisition {:.1} s{}",
+            "designed (plan {design_s:.1} s, start share {:.2} of τ ≤ {:.0}, stage {:.0} % found): predicted {:.2} / {} nm; achieved/predicted ×{:.2} / ×{:.2} (RMS of {} noise seeds, expected seed spread ±{:.0} % / ±{:.0} %: {}){}{}",
+            d.uniform_share,
+            d.start_tau_max,
+            100.0 * p.stage.found_fraction,
             p.front.rms_nm,
             p.back
                 .as_ref()
                 .map_or("—".into(), |b| format!("{:.2}", b.rms_nm)),
-            p.seconds,
+            ratio(0),
+            ratio(1),
+            per_seed.len(),
+            spread(Some(&p.front)),
+            spread(p.back.as_ref()),
+            per_seed
+                .iter()
+                .map(|r| format!("{:.2}/{:.2}", r.error_nm[0], r.error_nm[1]))
+                .collect::<Vec<_>>()
+                .join(", "),
+            p.not_measurable_because
+                .as_ref()
+                .map_or(String::new(), |w| format!("; PLANNER: not measurable ({w})")),
             if row.note.is_empty() {
                 String::new()
             } else {
                 format!("; {}", row.note)
             }
         );
-        eprintln!(
-            "designed {} frames: front {:.2} nm, back {:.2} nm; {}",
-            2 * n,
-            row.error_nm[0],
-            row.error_nm[1],
-            row.note
-        );
+        eprintln!("designed {} frames: {}", 2 * n, row.note);
         rows.push(row);
     }
     Ok(())
+}
+
+/// The rows of one schedule over several noise seeds as one: errors and
+/// reported σ as the RMS over the seeds (NaN when any seed measured
+/// nothing), points found and times as means, the notes of seeds that
+/// had one.
+fn combine(rows: &[Row]) -> Row {
+    let n = rows.len() as f64;
+    let rms = |f: &dyn Fn(&Row) -> f64| (rows.iter().map(|r| f(r).powi(2)).sum::<f64>() / n).sqrt();
+    let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).sum::<f64>() / n;
+    let mut notes: Vec<&str> = rows
+        .iter()
+        .map(|r| r.note.as_str())
+        .filter(|s| !s.is_empty())
+        .collect();
+    notes.dedup();
+    Row {
+        frames: rows[0].frames,
+        terms: rows[0].terms,
+        max_iter: rows[0].max_iter,
+        found: [mean(&|r| r.found[0]), mean(&|r| r.found[1])],
+        error_nm: [rms(&|r| r.error_nm[0]), rms(&|r| r.error_nm[1])],
+        reported_nm: [rms(&|r| r.reported_nm[0]), rms(&|r| r.reported_nm[1])],
+        spectral_s: mean(&|r| r.spectral_s),
+        surfaces_s: mean(&|r| r.surfaces_s),
+        note: notes.join("; "),
+        acquisition_s: f64::NAN,
+        predicted_nm: [f64::NAN; 2],
+        designed: false,
+        measurable: false,
+    }
 }
 
 /// Renders `frames` on the fly and runs the spectral solver.
@@ -202,7 +294,33 @@ fn solve_frames(
         cam.render(&p, k as u64, &mut buf);
         solver.push_frame(k, &buf)?;
     }
-    Ok(solver.solve()?)
+    checked(solver, station)
+}
+
+/// The solver's maps with the quality pass `mfd reconstruct` makes
+/// (fits far above the noise, points far from the station's prediction:
+/// set to NaN), so that the achieved error is the pipeline's.
+fn checked(mut solver: SpectralSolver, station: &Station) -> anyhow::Result<SpectralMaps> {
+    let mut maps = solver.solve()?;
+    let c = mfd::pipeline::consistency::check(
+        &mut maps,
+        solver.prior(),
+        station,
+        solver.design(),
+        mfd::pipeline::Limits::default(),
+    );
+    log::debug!("tradeoff: {}", c.note);
+    Ok(maps)
+}
+
+/// The uniform family: τ from 0.5 in steps of 0.5 to 0.5 n, n frames per direction.
+fn uniform(n: usize) -> Schedule {
+    Schedule {
+        tau_start: 0.5,
+        tau_stop: 0.5 * n as f64,
+        tau_step: 0.5,
+        ..Schedule::default()
+    }
 }
 
 /// Renders the schedule on the fly (no disk) and runs the spectral solver.
@@ -213,13 +331,7 @@ fn spectral(
     it: usize,
     args: &TradeoffArgs,
 ) -> anyhow::Result<SpectralMaps> {
-    let schedule = Schedule {
-        tau_start: 0.5,
-        tau_stop: 0.5 * n as f64,
-        tau_step: 0.5,
-        ..Schedule::default()
-    };
-    let patterns = schedule.patterns();
+    let patterns = uniform(n).patterns();
     let params = SimParams {
         noise_frac: args.noise,
         seed: args.seed + n as u64,
@@ -236,7 +348,7 @@ fn spectral(
         cam.render(p, k as u64, &mut buf);
         solver.push_frame(k, &buf)?;
     }
-    Ok(solver.solve()?)
+    checked(solver, station)
 }
 
 fn surfaces(
@@ -258,6 +370,10 @@ fn surfaces(
         spectral_s,
         surfaces_s: f64::NAN,
         note: String::new(),
+        acquisition_s: f64::NAN,
+        predicted_nm: [f64::NAN; 2],
+        designed: false,
+        measurable: false,
     };
     let opts = SurfaceOptions {
         terms: Some(terms),
@@ -303,16 +419,18 @@ fn surfaces(
 fn write_outputs(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
     let mut csv = String::from(
         "frames_per_direction,terms,max_iter,s1_found,s2_found,front_err_nm,back_err_nm,\
-         front_reported_nm,back_reported_nm,spectral_s,surfaces_s,note\n",
+         front_reported_nm,back_reported_nm,spectral_s,surfaces_s,acquisition_s,\
+         front_predicted_nm,back_predicted_nm,designed,note\n",
     );
     let mut md = String::from(
         "| frames/dir | terms | max iter | S1 / S2 found | front error (nm) | back error (nm) | \
-         reported σ front / back (nm) | spectral (s) | surfaces (s) | note |\n|---|---|---|---|---|---|---|---|---|---|\n",
+         reported σ front / back (nm) | spectral (s) | surfaces (s) | acquisition (s) | \
+         predicted front / back (nm) | note |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         writeln!(
             csv,
-            "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{}",
+            "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.2},{:.4},{:.4},{},{}",
             r.frames,
             r.terms,
             r.max_iter,
@@ -324,11 +442,15 @@ fn write_outputs(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
             r.reported_nm[1],
             r.spectral_s,
             r.surfaces_s,
-            r.note
+            r.acquisition_s,
+            r.predicted_nm[0],
+            r.predicted_nm[1],
+            r.designed,
+            r.note.replace(',', ";")
         )?;
         writeln!(
             md,
-            "| {} | {} | {} | {} / {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} | {} |",
+            "| {} | {} | {} | {} / {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} | {:.1} | {:.2} / {:.2} | {} |",
             r.frames,
             r.terms,
             r.max_iter,
@@ -340,6 +462,9 @@ fn write_outputs(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
             r.reported_nm[1],
             r.spectral_s,
             r.surfaces_s,
+            r.acquisition_s,
+            r.predicted_nm[0],
+            r.predicted_nm[1],
             r.note
         )?;
     }
@@ -350,8 +475,12 @@ fn write_outputs(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
     write("tradeoff.csv", &csv)?;
     write("tradeoff.md", &md)?;
     plot(rows, args)?;
+    plot_time(rows, args)?;
     println!("{md}");
-    println!("wrote {}", args.out.join("tradeoff.{csv,md,png}").display());
+    println!(
+        "wrote {} and tradeoff-time.png",
+        args.out.join("tradeoff.{csv,md,png}").display()
+    );
     Ok(())
 }
 
@@ -364,7 +493,7 @@ fn plot(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
     for &terms in &args.terms {
         let pick = |f: &dyn Fn(&Row) -> f64| -> Vec<(f64, f64)> {
             rows.iter()
-                .filter(|r| r.terms == terms && r.max_iter == it && !r.note.starts_with("designed"))
+                .filter(|r| r.terms == terms && r.max_iter == it && !r.designed)
                 .map(|r| ((2 * r.frames) as f64, f(r)))
                 .collect()
         };
@@ -400,6 +529,75 @@ fn plot(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
             panel("Front surface error", "RMS error (nm)", &s0, true),
             panel("Back surface error", "RMS error (nm)", &s1, true),
             panel("Compute time", "seconds (spectral + surfaces)", &s2, true),
+        ],
+    )?;
+    Ok(())
+}
+
+/// Error against acquisition time (the planner's timing), front and back:
+/// the uniform family and the designed schedules, achieved and their
+/// Cramér–Rao bound, at the largest term count and iteration limit.
+fn plot_time(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {
+    let it = args.max_iter.iter().copied().max().unwrap_or(30);
+    let terms = args.terms.iter().copied().max().unwrap_or(36);
+    let pick = |designed: bool, f: &dyn Fn(&Row) -> f64| -> Vec<(f64, f64)> {
+        let mut v: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.terms == terms && r.max_iter == it && r.designed == designed)
+            .map(|r| (r.acquisition_s, f(r)))
+            .collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        v
+    };
+    // The bound only where the planner says the stage measures the
+    // schedule: elsewhere it is no prediction of what will be achieved.
+    let bound = |r: &Row, k: usize| {
+        if r.measurable {
+            r.predicted_nm[k]
+        } else {
+            f64::NAN
+        }
+    };
+    let data: Vec<[Vec<(f64, f64)>; 4]> = (0..2)
+        .map(|k| {
+            [
+                pick(false, &|r| r.error_nm[k]),
+                pick(false, &|r| bound(r, k)),
+                pick(true, &|r| r.error_nm[k]),
+                pick(true, &|r| bound(r, k)),
+            ]
+        })
+        .collect();
+    let labels = [
+        "uniform, achieved",
+        "uniform, bound",
+        "designed, achieved",
+        "designed, bound",
+    ];
+    let series = |k: usize| -> Vec<Series> {
+        labels
+            .iter()
+            .zip(&data[k])
+            .map(|(l, d)| Series {
+                label: l,
+                points: d,
+            })
+            .collect()
+    };
+    let (s0, s1) = (series(0), series(1));
+    let panel = |title, series| Panel {
+        title,
+        x_label: "acquisition time (s)",
+        y_label: "RMS error (nm)",
+        log_x: true,
+        log_y: true,
+        series,
+    };
+    line_plot_png(
+        &args.out.join("tradeoff-time.png"),
+        &[
+            panel("Front surface error against time", &s0),
+            panel("Back surface error against time", &s1),
         ],
     )?;
     Ok(())

@@ -93,6 +93,34 @@ pub fn direction_ambiguity(taus: &[f64], kappa: f64, axis: &FringeAxis) -> (f64,
     (px(lobe.unwrap_or(1.05)), range.map(px))
 }
 
+/// The plate the plan expects: both faces bent by a defocus of
+/// `surface_nm` RMS (the largest shift of the screen points the prior's
+/// spread allows for), traced through `station`, the back's weight scaled
+/// by `back_scale` (0: removed) and no third path, as
+/// [`super::predict::traced_view`] does for the flat plate.
+pub fn expected_view(station: &Station, opts: &PlanOptions) -> Result<TracedView, PlanError> {
+    let e = &station.element;
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    let mut c = vec![0.0; 4];
+    c[3] = opts.surface_nm;
+    let bent = ZernikeBasis::new(4, e.aperture_radius_mm, centre)
+        .and_then(|b| ZernikeSurface::new(b, c))
+        .map_err(crate::budget::scene::BudgetError::from)?;
+    let mut view = TracedView::trace(
+        station,
+        &Plate::new(station, bent.clone(), bent, DEFAULT_EDGE_MARGIN_MM),
+    );
+    for p in &mut view.pixels {
+        if opts.back_scale == 0.0 {
+            p.back = Err(crate::optics::trace::Miss::ElementMissed);
+        } else if let Ok(h) = &mut p.back {
+            h.weight *= opts.back_scale;
+        }
+        p.third = Err(crate::optics::trace::Miss::ElementMissed);
+    }
+    Ok(view)
+}
+
 /// How far the true screen points may lie from the flat-plate prediction:
 /// the station's share plus the largest shift a defocus of
 /// `surface_nm` RMS on both faces makes (traced).
@@ -101,26 +129,21 @@ pub fn prior_spread_px(
     flat: &TracedView,
     opts: &PlanOptions,
 ) -> Result<f64, PlanError> {
-    let e = &station.element;
-    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
-    let mut c = vec![0.0; 4];
-    c[3] = opts.surface_nm;
-    let bent = ZernikeBasis::new(4, e.aperture_radius_mm, centre)
-        .and_then(|b| ZernikeSurface::new(b, c))
-        .map_err(crate::budget::scene::BudgetError::from)?;
-    let view = TracedView::trace(
-        station,
-        &Plate::new(station, bent.clone(), bent, DEFAULT_EDGE_MARGIN_MM),
-    );
+    Ok(spread_between(flat, &expected_view(station, opts)?, opts))
+}
+
+/// [`prior_spread_px`] with the expected plate `bent` ([`expected_view`])
+/// already traced.
+pub fn spread_between(flat: &TracedView, bent: &TracedView, opts: &PlanOptions) -> f64 {
     let mut worst: f64 = 0.0;
-    for (a, b) in flat.pixels.iter().zip(&view.pixels) {
+    for (a, b) in flat.pixels.iter().zip(&bent.pixels) {
         for (p, q) in [(a.front, b.front), (a.back, b.back)] {
             if let (Ok(p), Ok(q)) = (p, q) {
                 worst = worst.max((p.u - q.u).hypot(p.v - q.v));
             }
         }
     }
-    Ok(opts.station_spread_px + worst)
+    opts.station_spread_px + worst
 }
 
 /// The fraction of `pixels` (of `view`) whose noise-free series under

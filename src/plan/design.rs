@@ -30,13 +30,14 @@
 //! a repeat costs no settle time.
 //!
 //! **Constraints.** The optimum concentrates the frames near the τ of most
-//! information, which can leave the fit's start ambiguous (false fringes
-//! within the screen) or the reflections unseparated. The design used is
-//! the mixture `(1 − α) w* + α u` with the uniform weights `u` (the paper's
-//! kind of schedule) and the smallest α (bisection) for which the rounded
-//! schedule is unambiguous ([`super::ambiguity`]: no false maximum on the
-//! screen, the spectral stage's own start found on the sample pixels) and
-//! separable.
+//! information, which can leave the spectral stage's start on a wrong
+//! fringe or the reflections unseparated. The design used is the mixture
+//! `(1 − α) w* + α u` with the uniform weights `u` (the paper's kind of
+//! schedule) and the smallest α (bisection) for which the rounded schedule
+//! is measured by the spectral stage itself ([`super::stage`]: its search
+//! and fit run on sample pixels at the planned noise find the true points,
+//! so an alias outside the range the stage searches costs nothing) and is
+//! separable by the stage's 5σ rule.
 
 use crate::acquire::acquisition::FrameInfo;
 use crate::budget::scene;
@@ -44,8 +45,9 @@ use crate::optics::station::Station;
 use crate::solve::spectral::model::{normal_equations, Design, Params, MAX_REFLECTIONS};
 
 use super::ambiguity;
-use super::predict::{predict, sample_pixels, separation, traced_view, Prediction};
+use super::predict::{predict, run_stage, sample_pixels, separation, traced_view, Prediction};
 use super::{invalid, PlanError, PlanOptions};
+use crate::optics::trace::TracedView;
 
 /// What a design is for.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,8 +99,11 @@ pub struct Designed {
     pub frames: Vec<FrameInfo>,
     /// Its prediction.
     pub prediction: Prediction,
-    /// Share α of the uniform design mixed in for the constraints.
+    /// Share α of the start component (uniform over τ ≤
+    /// [`Self::start_tau_max`]) mixed in for the constraints.
     pub uniform_share: f64,
+    /// Largest τ of the start component.
+    pub start_tau_max: f64,
     /// The rounded design's criterion over the Fisher-information limit
     /// (the equivalence-theorem lower bound of the best continuous design
     /// of these candidates at the same frames): ≤ 1, 1 is the limit.
@@ -291,41 +296,65 @@ fn weights_of(candidates: &[FrameInfo], frames: &[FrameInfo]) -> Vec<f64> {
     w
 }
 
-/// Whether a rounded schedule meets the constraints.
+/// The traced plates the constraints are checked on, traced once per design.
+struct Views {
+    /// The flat plate with the back scaled (the prediction).
+    flat: TracedView,
+    /// The expected plate ([`ambiguity::expected_view`]): the truth the
+    /// stage is run on.
+    bent: TracedView,
+}
+
+/// Largest τ of the start component tried, in units of τ_max (the whole
+/// grid, 2 τ_max, last).
+const START_LADDERS: [f64; 4] = [0.5, 0.75, 1.0, 2.0];
+
+/// The start component's share is searched on a grid of 1/`GRID`, then
+/// by `BISECTIONS` halvings below the first admissible one: to 1/32.
+const GRID: usize = 8;
+const BISECTIONS: usize = 2;
+
+/// Whether a rounded schedule meets the constraints: the spectral stage,
+/// run on sample pixels at the planned noise, finds the true points
+/// ([`super::stage`]; this is the start's ambiguity as the stage meets it,
+/// within the range it searches), and the reflections are separable by
+/// the stage's 5σ rule.
 fn admissible(
     station: &Station,
     frames: &[FrameInfo],
     opts: &DesignOptions,
+    views: &Views,
 ) -> Result<bool, PlanError> {
+    if opts
+        .directions_deg
+        .iter()
+        .any(|&d| frames.iter().filter(|f| f.direction_deg == d).count() < 2)
+    {
+        return Ok(false);
+    }
     let design = scene::design(station, frames)?;
-    let view = traced_view(station, opts.plan.back_scale)?;
-    let kappa = opts.plan.radiometry.tau_max.powi(-2);
-    let no_alias = opts.directions_deg.iter().all(|&d| {
-        let taus: Vec<f64> = frames
-            .iter()
-            .filter(|f| f.direction_deg == d)
-            .map(|f| f.tau)
-            .collect();
-        let axis = crate::acquire::patterns::FringeAxis::new(
-            d,
-            station.screen.width,
-            station.screen.height,
-        );
-        taus.len() >= 2
-            && ambiguity::direction_ambiguity(&taus, kappa, &axis)
-                .1
-                .is_none()
-    });
-    if !no_alias {
-        return Ok(false);
-    }
-    let sample = sample_pixels(&view, 32, false);
-    if ambiguity::start_found_fraction(&design, &view, &sample, kappa) < 0.95 {
-        return Ok(false);
-    }
-    let gain = opts.plan.radiometry.gain(&view);
-    let both = sample_pixels(&view, 64, true);
-    Ok(separation(&design, &view, &both, gain, &opts.plan).separable)
+    let stage = run_stage(
+        station,
+        &design,
+        &views.flat,
+        &views.bent,
+        super::predict::STAGE_PIXELS,
+        &opts.plan,
+    )?;
+    let gain = opts.plan.radiometry.gain(&views.flat);
+    let both = sample_pixels(&views.flat, 64, true);
+    let sep = stage
+        .measurable
+        .then(|| separation(&design, &views.flat, &both, gain, &opts.plan));
+    log::debug!(
+        "design candidate of {} frames: stage ({}) found {:.2}, no signal {:.2}; separable {:?}",
+        frames.len(),
+        stage.engine,
+        stage.found_fraction,
+        stage.no_signal_fraction,
+        sep.as_ref().map(|s| s.separable_fraction)
+    );
+    Ok(sep.is_some_and(|s| s.separable))
 }
 
 /// The constrained design of exactly `n` frames.
@@ -335,46 +364,100 @@ fn design_frames(
     opts: &DesignOptions,
     prob: &Problem,
     opt: &(Vec<f64>, f64),
+    views: &Views,
 ) -> Result<Designed, PlanError> {
     let (w_star, lower) = opt;
-    let m = prob.candidates.len();
-    let mix = |alpha: f64| -> Vec<f64> {
-        w_star
-            .iter()
-            .map(|&w| (1.0 - alpha) * w + alpha / m as f64)
-            .collect()
-    };
-    let at = |alpha: f64| round(&prob.candidates, &mix(alpha), n);
-    let (mut lo, mut hi) = (0.0, 1.0);
-    if admissible(station, &at(0.0), opts)? {
-        hi = 0.0;
-    } else {
-        for _ in 0..6 {
-            let mid = 0.5 * (lo + hi);
-            if admissible(station, &at(mid), opts)? {
-                hi = mid;
-            } else {
-                lo = mid;
+    let tau_max = opts.plan.radiometry.tau_max;
+    let top = prob.candidates.iter().map(|c| c.tau).fold(0.0, f64::max);
+    // The start component: uniform over the candidates up to τ_u. Over the
+    // whole grid (up to 2 τ_max) a third of it sits where a frame carries
+    // less than e⁻⁸·⁸ of the information at τ_max/√2; the stage's start
+    // needs the low and middle τ (the periodogram's main lobe and a ladder
+    // the fit cannot skip a fringe on), so shorter ladders are tried too.
+    let mut best: Option<(f64, f64, f64, Vec<FrameInfo>)> = None;
+    for frac in START_LADDERS {
+        let tau_u = (frac * tau_max).min(top);
+        let inside = prob.candidates.iter().filter(|c| c.tau <= tau_u).count();
+        if inside < 8 * opts.directions_deg.len() {
+            continue;
+        }
+        let mix = |alpha: f64| -> Vec<f64> {
+            w_star
+                .iter()
+                .zip(&prob.candidates)
+                .map(|(&w, c)| {
+                    let u = if c.tau <= tau_u {
+                        1.0 / inside as f64
+                    } else {
+                        0.0
+                    };
+                    (1.0 - alpha) * w + alpha * u
+                })
+                .collect()
+        };
+        let at = |alpha: f64| {
+            log::debug!("design of {n} frames: trying share {alpha} of uniform τ ≤ {tau_u}");
+            round(&prob.candidates, &mix(alpha), n)
+        };
+        // The smallest admissible share on a grid of 1/8 (admissibility
+        // need not be monotone in α: a short ladder alone separates
+        // nothing, mixed with w* it may), then bisection below it.
+        let mut first = None;
+        for k in 0..=GRID {
+            let alpha = k as f64 / GRID as f64;
+            if admissible(station, &at(alpha), opts, views)? {
+                first = Some(alpha);
+                break;
             }
         }
+        let Some(mut hi) = first else {
+            continue;
+        };
+        let mut lo = (hi - 1.0 / GRID as f64).max(0.0);
+        if hi > 0.0 {
+            for _ in 0..BISECTIONS {
+                let mid = 0.5 * (lo + hi);
+                if admissible(station, &at(mid), opts, views)? {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+        }
+        let frames = at(hi);
+        let Some((phi, _)) = prob.criterion(&weights_of(&prob.candidates, &frames)) else {
+            continue;
+        };
+        log::debug!("design of {n} frames: τ_u {tau_u}: share {hi}, criterion {phi}");
+        if best.as_ref().is_none_or(|b| phi < b.0) {
+            best = Some((phi, hi, tau_u, frames));
+        }
     }
-    let frames = at(hi);
-    let (phi, _) = prob
-        .criterion(&weights_of(&prob.candidates, &frames))
-        .ok_or_else(|| {
-            invalid(
-                "the design",
-                format!("{n} frames leave a sample pixel's information singular: give more frames"),
-            )
-        })?;
+    let (phi, hi, tau_u, frames) = match best {
+        Some(b) => b,
+        None => {
+            // Nothing the stage measures: the uniform design of the whole
+            // grid, predicted (and flagged) as it is.
+            let m = prob.candidates.len();
+            let frames = round(&prob.candidates, &vec![1.0 / m as f64; m], n);
+            let (phi, _) = prob
+                .criterion(&weights_of(&prob.candidates, &frames))
+                .ok_or_else(|| {
+                    invalid(
+                        "the design",
+                        format!("{n} frames leave a sample pixel's information singular: give more frames"),
+                    )
+                })?;
+            log::warn!("design of {n} frames: no schedule tried is measured by the spectral stage and separable at this budget");
+            (phi, 1.0, top, frames)
+        }
+    };
     let prediction = predict(station, &frames, &opts.plan)?;
-    if !admissible(station, &frames, opts)? {
-        log::warn!("design of {n} frames: even the uniform schedule is ambiguous or unseparated at this budget");
-    }
     Ok(Designed {
         frames,
         prediction,
         uniform_share: hi,
+        start_tau_max: tau_u,
         efficiency: (lower / phi).min(1.0),
         criterion_px2: [phi / n as f64, lower / n as f64],
     })
@@ -400,6 +483,10 @@ pub fn design(
     }
     let (prob, _) = problem(station, opts)?;
     let opt = prob.optimum(opts.iterations)?;
+    let views = Views {
+        flat: traced_view(station, opts.plan.back_scale)?,
+        bent: ambiguity::expected_view(station, &opts.plan)?,
+    };
     let min_frames = 8 * opts.directions_deg.len();
     let worst = |d: &Designed| {
         d.prediction
@@ -417,7 +504,7 @@ pub fn design(
                     format!("expected at least {min_frames} frames, found {n}"),
                 ));
             }
-            design_frames(station, n, opts, &prob, &opt)
+            design_frames(station, n, opts, &prob, &opt, &views)
         }
         Budget::Seconds(t) => {
             let t_min = opts
@@ -432,7 +519,7 @@ pub fn design(
             }
             let mut n = ((t / opts.plan.timing.frame_s()) as usize).max(min_frames);
             for _ in 0..8 {
-                let d = design_frames(station, n, opts, &prob, &opt)?;
+                let d = design_frames(station, n, opts, &prob, &opt, &views)?;
                 if d.prediction.seconds <= t {
                     return Ok(d);
                 }
@@ -452,7 +539,7 @@ pub fn design(
             }
             let mut n = 1000;
             for _ in 0..8 {
-                let d = design_frames(station, n, opts, &prob, &opt)?;
+                let d = design_frames(station, n, opts, &prob, &opt, &views)?;
                 let r = worst(&d);
                 if r <= x && d.prediction.back.is_some() == (opts.plan.back_scale > 0.0) {
                     // Shrink while the 1/√N law says a smaller one would do.
@@ -460,7 +547,7 @@ pub fn design(
                     if smaller + n / 50 >= n || smaller < min_frames {
                         return Ok(d);
                     }
-                    let d2 = design_frames(station, smaller, opts, &prob, &opt)?;
+                    let d2 = design_frames(station, smaller, opts, &prob, &opt, &views)?;
                     return Ok(if worst(&d2) <= x { d2 } else { d });
                 }
                 let grow = ((n as f64) * (r / x).powi(2) * 1.05).ceil() as usize;

@@ -15,12 +15,14 @@
 pub mod ambiguity;
 pub mod design;
 pub mod predict;
+pub mod stage;
 pub mod timing;
 
 use std::path::PathBuf;
 
 pub use design::{design, Budget, DesignOptions, Designed};
 pub use predict::{predict, BoundKind, Prediction, Separation, SurfacePrediction};
+pub use stage::StageCheck;
 pub use timing::Timing;
 
 use crate::budget::scene::Radiometry;
@@ -83,6 +85,10 @@ pub struct PlanOptions {
     pub timing: Timing,
     /// Block size of the bound's evaluation; `None`: automatic.
     pub bound_stride_px: Option<usize>,
+    /// The spectral stage's settings the schedule will be reconstructed
+    /// with (engine, band, iteration cap): the stage run on sample pixels
+    /// ([`stage`]) uses them.
+    pub spectral: crate::solve::spectral::SpectralConfig,
 }
 
 impl Default for PlanOptions {
@@ -95,6 +101,7 @@ impl Default for PlanOptions {
             station_spread_px: 3.0,
             timing: Timing::default(),
             bound_stride_px: None,
+            spectral: crate::solve::spectral::SpectralConfig::default(),
         }
     }
 }

@@ -20,6 +20,7 @@ use crate::solve::spectral::pixel::RESOLVE_SIGMAS;
 use crate::solve::surfaces::{reconstruct, Observations, Uncertainty};
 
 use super::ambiguity::{self, Ambiguity};
+use super::stage::{self, StageCheck};
 use super::{invalid, PlanError, PlanOptions};
 
 /// Fraction of the pixels with both reflections that must be separable
@@ -46,6 +47,25 @@ pub struct SurfacePrediction {
     /// Expected RMS error over the aperture, piston and tilts removed: the
     /// root of the summed variances of terms j ≥ 4, nm.
     pub rms_nm: f64,
+}
+
+impl SurfacePrediction {
+    /// Relative standard deviation of the achieved RMS error over `seeds`
+    /// noise draws, if the errors are the bound's: the squared RMS is
+    /// `S = Σ e_j²` (j ≥ 4) with `e_j ~ N(0, σ_j²)` independent, so
+    /// `Var S = 2 Σ σ_j⁴` and, to first order, `sd(√S)/√S = ½ sd(S)/S =
+    /// √(2 Σ σ⁴) / (2 Σ σ²)`; the RMS over m seeds has `Var` over m. It is
+    /// `1/√(2 n_eff m)` with `n_eff = (Σσ²)²/Σσ⁴` the effective number of
+    /// terms: equal σ over 33 terms give 12 % for one seed, a bound
+    /// dominated by a few low-order terms much more.
+    pub fn rms_relative_spread(&self, seeds: usize) -> f64 {
+        let (s2, s4) = self
+            .std_nm
+            .iter()
+            .skip(3)
+            .fold((0.0, 0.0), |(a, b), s| (a + s * s, b + s.powi(4)));
+        (2.0 * s4).sqrt() / (2.0 * s2) / (seeds.max(1) as f64).sqrt()
+    }
 }
 
 /// Whether the per-pixel stage can tell the two reflections apart.
@@ -83,8 +103,15 @@ pub struct Prediction {
     pub back_not_measured_because: Option<String>,
     /// Separability of the two reflections.
     pub separation: Separation,
-    /// Ambiguity of the start.
+    /// Ambiguity of the start (diagnostic: the information-weighted
+    /// ambiguity function and the noise-free periodogram start).
     pub ambiguity: Ambiguity,
+    /// The spectral stage run on sample pixels at the planned noise
+    /// ([`stage::stage_check`]): whether it finds the true points.
+    pub stage: StageCheck,
+    /// Why the stage will not measure this schedule, in an operator's
+    /// words; `None` when it will ([`StageCheck::measurable`]).
+    pub not_measurable_because: Option<String>,
     /// The block size the bound was evaluated on, camera px.
     pub bound_stride_px: usize,
 }
@@ -127,6 +154,64 @@ pub fn sample_pixels(view: &TracedView, n: usize, both: bool) -> Vec<usize> {
     let step = lit.len().div_ceil(n.max(1)).max(1);
     lit.into_iter().step_by(step).collect()
 }
+
+/// Up to `n` pixels spread evenly over the sensor whose reflections in
+/// the expected plate `bent` are those of the flat prediction `flat` (no
+/// path appears or leaves at the rim between them), with both reflections
+/// when `both`: the pixels the stage is run on.
+pub fn stage_pixels(flat: &TracedView, bent: &TracedView, n: usize, both: bool) -> Vec<usize> {
+    let same = |q: usize| {
+        let (a, b) = (&flat.pixels[q], &bent.pixels[q]);
+        a.front.is_ok() == b.front.is_ok() && a.back.is_ok() == b.back.is_ok()
+    };
+    let lit: Vec<usize> = (0..flat.pixels.len())
+        .filter(|&q| {
+            let p = &flat.pixels[q];
+            let ok = if both {
+                p.front.is_ok() && p.back.is_ok_and(|h| h.weight > 0.0)
+            } else {
+                p.front.is_ok()
+            };
+            ok && same(q)
+        })
+        .collect();
+    let step = lit.len().div_ceil(n.max(1)).max(1);
+    lit.into_iter().step_by(step).collect()
+}
+
+/// The stage run on `n` sample pixels of `frames`' design (see
+/// [`stage::stage_check`]): the prior is the station's flat plate with
+/// both paths (what the stage holds, AR-coated or not), the truth the
+/// expected plate.
+pub fn run_stage(
+    station: &Station,
+    design: &Design,
+    view: &TracedView,
+    bent: &TracedView,
+    n: usize,
+    opts: &PlanOptions,
+) -> Result<StageCheck, PlanError> {
+    let full;
+    let prior = if opts.back_scale == 1.0 {
+        view
+    } else {
+        full = traced_view(station, 1.0)?;
+        &full
+    };
+    let both = opts.back_scale > 0.0;
+    let pixels = stage_pixels(view, bent, n, both);
+    let gain = opts.radiometry.gain(view);
+    Ok(stage::stage_check(
+        design, prior, bent, &pixels, gain, opts, STAGE_SEED,
+    ))
+}
+
+/// The noise draws of the stage's check: fixed, so that a plan is the
+/// same every time it is made.
+pub const STAGE_SEED: u64 = 0x005e_ed17;
+
+/// Sample pixels the stage is run on by [`predict`].
+pub const STAGE_PIXELS: usize = 64;
 
 /// The bound's covariance of one pixel (`screen_cov.npy` layout, 16 values).
 pub fn pixel_cov(
@@ -214,7 +299,19 @@ pub fn predict(
     let gain = opts.radiometry.gain(&view);
     let both = sample_pixels(&view, 400, true);
     let separation = separation(&design, &view, &both, gain, opts);
-    let spread = ambiguity::prior_spread_px(station, &view, opts)?;
+    let bent = ambiguity::expected_view(station, opts)?;
+    let spread = ambiguity::spread_between(&view, &bent, opts);
+    let stage = run_stage(station, &design, &view, &bent, STAGE_PIXELS, opts)?;
+    let not_measurable_because = (!stage.measurable).then(|| {
+        format!(
+            "the spectral stage ({} engine), run on {} sample pixels at this noise, found the true points on {:.0} % of them (needs {:.0} %; no signal detected on {:.0} %): give more frames or spread τ wider",
+            stage.engine,
+            stage.pixels,
+            100.0 * stage.found_fraction,
+            100.0 * stage::STAGE_FRACTION,
+            100.0 * stage.no_signal_fraction
+        )
+    });
     let sample = sample_pixels(&view, 200, false);
     let kappa = opts.radiometry.tau_max.powi(-2);
     let ambiguity = ambiguity::ambiguity(station, frames, &design, (&view, &sample), spread, kappa);
@@ -270,6 +367,8 @@ pub fn predict(
         back_not_measured_because: back_off,
         separation,
         ambiguity,
+        stage,
+        not_measurable_because,
         bound_stride_px: stride,
     })
 }
@@ -293,6 +392,9 @@ impl Prediction {
             },
             "separation": self.separation,
             "ambiguity": self.ambiguity,
+            "measurable": self.not_measurable_because.is_none(),
+            "not_measurable_because": self.not_measurable_because,
+            "stage": self.stage,
             "bound_stride_px": self.bound_stride_px,
         })
     }
