@@ -86,7 +86,7 @@ fn add_third_uncertainty(sol: &mut SurfaceSolution, before: &[Vec<f64>; 2], t: &
     if t.factor == 0.0 {
         return;
     }
-    let layout = sol.layout.clone();
+    let layout = sol.layout;
     let mut d = nalgebra::DVector::zeros(layout.columns());
     let surfaces = [sol.front.coefficients_nm(), sol.back.coefficients_nm()];
     for (side, now) in surfaces.iter().enumerate() {

@@ -72,7 +72,8 @@ pub const REACH: f64 = 4.0;
 /// `α = (c − mu)/sigma`. Tends to `c` where the clip lies far below the
 /// model (Φ underflows) and to `mu` where it lies far above it.
 pub fn mean_below(mu: f64, sigma: f64, c: f64) -> f64 {
-    if !(sigma > 0.0) {
+    // No noise (or a NaN σ): the level itself, at most the clip.
+    if sigma.is_nan() || sigma <= 0.0 {
         return mu.min(c);
     }
     let a = (c - mu) / sigma;
