@@ -126,6 +126,23 @@ fn errors(c: &Case, stage: &SurfaceStage) -> ([f64; 2], [f64; 2]) {
     (err, rep)
 }
 
+/// Σ over both surfaces' fitted coefficients j ≥ 2 of (error/σ)², and
+/// their count.
+fn z_squares(c: &Case, stage: &SurfaceStage) -> (f64, usize) {
+    let sol = &stage.solution;
+    let truth = [c.truth.0.coefficients_nm(), c.truth.1.coefficients_nm()];
+    let fitted = [sol.front.coefficients_nm(), sol.back.coefficients_nm()];
+    let std = [&sol.front_std_nm, &sol.back_std_nm];
+    let (mut z2, mut n) = (0.0, 0);
+    for k in 0..2 {
+        for j in 1..fitted[k].len() {
+            z2 += ((fitted[k][j] - truth[k][j]) / std[k][j]).powi(2);
+            n += 1;
+        }
+    }
+    (z2, n)
+}
+
 /// One seed: a surface's RMS error over 12 coefficients (j = 4…15) is
 /// `σ_rms · sqrt(χ²₁₂/12)`, whose 0.1 %–99.9 % range is 0.40–1.77; the
 /// bounds below add the estimator's allowance of the issue (2× the bound
@@ -249,16 +266,9 @@ fn high_index_plate_has_no_bias_from_clipped_troughs() {
         // Rendered without a third path, and none modelled: a false
         // detection at the fit's 5σ rule has probability 6e-7.
         assert!(d.third_reflection.is_none(), "{:?}", d.third_reflection);
-        let sol = &stage.solution;
-        let truth = [c.truth.0.coefficients_nm(), c.truth.1.coefficients_nm()];
-        let fitted = [sol.front.coefficients_nm(), sol.back.coefficients_nm()];
-        let std = [&sol.front_std_nm, &sol.back_std_nm];
-        for k in 0..2 {
-            for j in 1..fitted[k].len() {
-                z2 += ((fitted[k][j] - truth[k][j]) / std[k][j]).powi(2);
-                zn += 1;
-            }
-        }
+        let (z, n) = z_squares(&c, &stage);
+        z2 += z;
+        zn += n;
         let (err, rep) = errors(&c, &stage);
         for k in 0..2 {
             e2[k] += err[k].powi(2);
@@ -298,16 +308,9 @@ fn third_reflection_is_found_and_modelled() {
             (third.factor - 1.0).abs() < 4.0 * third.sigma && third.sigma < 0.2,
             "{third:?}"
         );
-        let sol = &stage.solution;
-        let truth = [c.truth.0.coefficients_nm(), c.truth.1.coefficients_nm()];
-        let fitted = [sol.front.coefficients_nm(), sol.back.coefficients_nm()];
-        let std = [&sol.front_std_nm, &sol.back_std_nm];
-        for k in 0..2 {
-            for j in 1..fitted[k].len() {
-                z2 += ((fitted[k][j] - truth[k][j]) / std[k][j]).powi(2);
-                zn += 1;
-            }
-        }
+        let (z, n) = z_squares(&c, &stage);
+        z2 += z;
+        zn += n;
     }
     let z = (z2 / zn as f64).sqrt();
     assert!((0.8..1.3).contains(&z), "RMS(error/σ) {z}");

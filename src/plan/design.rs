@@ -42,7 +42,7 @@
 use crate::acquire::acquisition::FrameInfo;
 use crate::budget::scene;
 use crate::optics::station::Station;
-use crate::solve::spectral::model::{normal_equations, Design, Params, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{normal_equations, Design};
 
 use super::ambiguity;
 use super::predict::{predict, run_stage, sample_pixels, separation, traced_view, Prediction};
@@ -161,23 +161,8 @@ fn problem(station: &Station, opts: &DesignOptions) -> Result<(Problem, Design),
     let mut pixels = Vec::new();
     let mut grads = Vec::new();
     for q in sample_pixels(&view, opts.pixels, false) {
-        let px = &view.pixels[q];
-        let hits: Vec<_> = [px.front, px.back]
-            .into_iter()
-            .filter_map(|h| h.ok().filter(|h| h.weight > 0.0))
-            .collect();
-        let k = hits.len();
-        let mut p = Params {
-            k,
-            offset: gain * (r.ambient + 0.5 * hits.iter().map(|h| h.weight).sum::<f64>()),
-            amp: [0.0; MAX_REFLECTIONS],
-            uv: [[0.0; 2]; MAX_REFLECTIONS],
-            kappa: r.tau_max.powi(-2),
-        };
-        for (j, h) in hits.iter().enumerate() {
-            p.amp[j] = 0.5 * gain * h.weight;
-            p.uv[j] = [h.u, h.v];
-        }
+        let p = super::stage::truth_params(&view.pixels[q], gain, r);
+        let k = p.k;
         // The model's gradient row has ∂/∂A = 1 first, so a one-frame JᵀJ's
         // first column is the row itself.
         let g: Vec<Vec<f64>> = (0..candidates.len() as u32)

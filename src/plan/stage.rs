@@ -60,24 +60,36 @@ pub struct StageCheck {
     pub measurable: bool,
 }
 
-/// The candidates the stage fits: pixels with a front or back path in the
-/// prior, grown by `margin` px (the count decides the engine: what
-/// `spectral::prior`'s candidate mask holds).
-fn candidate_count(prior: &TracedView, margin: i64) -> usize {
-    let (w, h) = (prior.width as i64, prior.height as i64);
-    let mut mask = vec![false; prior.pixels.len()];
-    for (k, p) in prior.pixels.iter().enumerate() {
-        if p.front.is_err() && p.back.is_err() {
-            continue;
-        }
-        let (i, j) = (k as i64 % w, k as i64 / w);
-        for y in (j - margin).max(0)..=(j + margin).min(h - 1) {
-            for x in (i - margin).max(0)..=(i + margin).min(w - 1) {
-                mask[(y * w + x) as usize] = true;
-            }
-        }
+/// The spectral model's parameters of a pixel whose paths are `truth`
+/// (the reflections with a weight), at the camera gain `gain` and the
+/// radiometry `r`: the simulator's intensities as the fits see them.
+pub(super) fn truth_params(
+    truth: &PixelPaths,
+    gain: f64,
+    r: &crate::budget::scene::Radiometry,
+) -> Params {
+    let hits: Vec<_> = [truth.front, truth.back]
+        .into_iter()
+        .filter_map(|h| h.ok().filter(|h| h.weight > 0.0))
+        .collect();
+    let mut p = Params {
+        k: hits.len(),
+        offset: gain * (r.ambient + 0.5 * hits.iter().map(|h| h.weight).sum::<f64>()),
+        amp: [0.0; MAX_REFLECTIONS],
+        uv: [[0.0; 2]; MAX_REFLECTIONS],
+        kappa: r.tau_max.powi(-2),
+    };
+    for (j, h) in hits.iter().enumerate() {
+        p.amp[j] = 0.5 * gain * h.weight;
+        p.uv[j] = [h.u, h.v];
     }
-    mask.iter().filter(|&&m| m).count()
+    p
+}
+
+/// The candidates the stage fits (the count decides the engine): the
+/// spectral stage's own candidate mask.
+fn candidate_count(prior: &TracedView, margin: i64) -> usize {
+    crate::solve::spectral::prior_candidates(prior, margin).len()
 }
 
 /// Whether the stage keeps statistics for `frames` frames on `prior`
@@ -157,21 +169,7 @@ fn series(
     rng: &mut rand_xoshiro::Xoshiro256PlusPlus,
 ) -> Vec<u16> {
     let r = &opts.radiometry;
-    let hits: Vec<_> = [truth.front, truth.back]
-        .into_iter()
-        .filter_map(|h| h.ok().filter(|h| h.weight > 0.0))
-        .collect();
-    let mut p = Params {
-        k: hits.len(),
-        offset: gain * (r.ambient + 0.5 * hits.iter().map(|h| h.weight).sum::<f64>()),
-        amp: [0.0; MAX_REFLECTIONS],
-        uv: [[0.0; 2]; MAX_REFLECTIONS],
-        kappa: r.tau_max.powi(-2),
-    };
-    for (j, h) in hits.iter().enumerate() {
-        p.amp[j] = 0.5 * gain * h.weight;
-        p.uv[j] = [h.u, h.v];
-    }
+    let p = truth_params(truth, gain, r);
     let full = f64::from((1u32 << r.bit_depth.min(16)) - 1);
     let sigma = r.sigma_counts();
     let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];

@@ -44,6 +44,7 @@ mod stream;
 pub use batch::{CpuFits, FitBackend, FitBatch};
 pub use config::{Engine, SpectralConfig, SpectralError, SERIES_LIMIT_BYTES};
 pub use maps::SpectralMaps;
+pub(crate) use prior::candidates as prior_candidates;
 pub use prior::flat_plate_prior;
 pub use statistics::StatisticsError;
 pub use stream::{design, SpectralSolver};

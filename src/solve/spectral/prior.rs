@@ -179,7 +179,7 @@ fn borrowed_offsets(prior: &TracedView, candidates: &[u32], radius: i64) -> Vec<
 }
 
 /// Pixels whose front or back path exists in the prior, grown by `margin` px.
-fn candidates(prior: &TracedView, margin: i64) -> Vec<u32> {
+pub(crate) fn candidates(prior: &TracedView, margin: i64) -> Vec<u32> {
     let (w, h) = (prior.width as i64, prior.height as i64);
     let mut mask = vec![false; prior.pixels.len()];
     for (k, p) in prior.pixels.iter().enumerate() {
