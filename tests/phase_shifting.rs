@@ -12,7 +12,6 @@ use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{phase_shift_patterns, PhaseShiftParams, PhaseShiftRenderer};
-use mfd::solve::spectral::bound::phase_shifting_cov;
 use mfd::solve::spectral::phase::PhaseModel;
 use mfd::solve::spectral::{flat_plate_prior, SpectralConfig, SpectralMaps, SpectralSolver};
 
@@ -101,39 +100,7 @@ fn run_on(
         schedule,
         response,
     };
-    // The noise-free samples, for the bound's nuisance parameters (the
-    // model fitted to them from the truth).
-    let clean: Vec<Vec<f64>> = patterns.iter().map(|p| cam.expected(p)).collect();
-    let index: Vec<u32> = (0..patterns.len() as u32).collect();
-    let ones = vec![1.0; patterns.len()];
-    let (mut e2, mut c2, mut z2, mut nz, mut worst_z) = (0.0, 0.0, 0.0, 0usize, 0.0f64);
-    let (mut expected, mut decoded) = (0, 0);
-    let mut errors = Vec::new();
-    for (q, px) in view.pixels.iter().enumerate() {
-        let Ok(truth) = px.front else { continue };
-        expected += 1;
-        let r = &maps.pixels[q];
-        if !r.s[0][0].is_finite() {
-            continue;
-        }
-        decoded += 1;
-        let y: Vec<f64> = clean.iter().map(|f| f[q]).collect();
-        let start = model
-            .linear_start(&index, &y, &ones, [truth.u, truth.v], 1e-4)
-            .unwrap();
-        let mut nuisance = model.fit(&index, &y, &ones, start, 100).params;
-        nuisance.uv = [truth.u, truth.v];
-        let bound = phase_shifting_cov(&model, &nuisance, |mu| cam.variance(mu)).unwrap();
-        let e = [r.s[0][0] - truth.u, r.s[0][1] - truth.v];
-        e2 += e[0] * e[0] + e[1] * e[1];
-        c2 += bound[0][0] + bound[1][1];
-        for (ek, sk) in e.iter().zip(r.std[0]) {
-            z2 += (ek / sk).powi(2);
-            nz += 1;
-            worst_z = worst_z.max((ek / sk).abs());
-        }
-        errors.push(([truth.u, truth.v], e));
-    }
+    let d = common::phase::score(&view, &maps, &model, &cam, patterns);
     let ripple = patterns
         .iter()
         .map(|p| p.direction_deg)
@@ -144,17 +111,16 @@ fn run_on(
             dirs
         })
         .into_iter()
-        .map(|d| ripple(station, d, &errors))
+        .map(|dir| ripple(station, dir, &d.errors))
         .collect();
-    let n = decoded.max(1) as f64;
     Outcome {
-        expected,
-        decoded,
-        rms_error: (e2 / n).sqrt(),
-        rms_bound: (c2 / n).sqrt(),
-        rms_z: (z2 / nz.max(1) as f64).sqrt(),
-        worst_z,
-        ripple_px: ripple_px(station, &errors),
+        expected: d.expected,
+        decoded: d.decoded,
+        rms_error: d.rms_error,
+        rms_bound: d.rms_bound,
+        rms_z: d.rms_z,
+        worst_z: d.worst_z,
+        ripple_px: common::phase::ripple_px(station, &d.errors, TAUS[3]),
         ripple,
     }
 }
@@ -277,31 +243,6 @@ fn without_the_response_model_the_noisy_decode_is_pessimistic() {
     // small (4 of the scatter of RMS(err/σ) below 1).
     let tol = 4.0 / (2.0 * o.decoded as f64).sqrt();
     assert!(o.rms_z < 1.0 - tol, "RMS(err/σ) {}", o.rms_z);
-}
-
-/// The amplitude (screen px along the direction) of the error's component
-/// at `exp(2πi m τ_f s)`, m = 1 … 4, largest over m and both ±45° axes.
-fn ripple_px(station: &Station, errors: &[([f64; 2], [f64; 2])]) -> f64 {
-    let n = errors.len() as f64;
-    let mut worst = 0.0f64;
-    for d in [45.0, -45.0] {
-        let axis = FringeAxis::new(d, station.screen.width, station.screen.height);
-        let (a, b) = axis.gradient();
-        let norm = a.hypot(b);
-        for m in 1..=4 {
-            let f = m as f64 * TAUS[3];
-            let (mut re, mut im) = (0.0, 0.0);
-            for (uv, e) in errors {
-                // Error along the axis, screen px.
-                let x = (a * e[0] + b * e[1]) / norm;
-                let (sn, cs) = (std::f64::consts::TAU * f * axis.s(uv[0], uv[1])).sin_cos();
-                re += x * cs;
-                im += x * sn;
-            }
-            worst = worst.max(2.0 * re.hypot(im) / n);
-        }
-    }
-    worst
 }
 
 #[test]

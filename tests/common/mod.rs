@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod phase;
 pub mod spectral;
 
 use std::path::PathBuf;
