@@ -7,6 +7,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/install-deps.sh
 
+# No incremental cache unless asked (CARGO_INCREMENTAL=1): a clean checkout
+# gains nothing from it, and its cache is a large part of target/.
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
+
 # Mesa (the display tests' lavapipe) wants a private runtime directory.
 if [ ! -d "${XDG_RUNTIME_DIR:-}" ]; then
   XDG_RUNTIME_DIR="$(mktemp -d)" && export XDG_RUNTIME_DIR
@@ -24,3 +28,4 @@ cargo test --doc --locked
 cargo test --locked --features datx --test compare_datx  # Zygo .datx through HDF5, files written by h5py
 echo "== cargo test, hardware features: the window under Xvfb, Aravis's fake GigE Vision camera on loopback"
 cargo test --locked --features display,aravis,v4l --lib --test display_xvfb --test display_offscreen --test aravis_fake
+echo "== disk used by the build: $(du -sh target | cut -f1)"
