@@ -95,14 +95,26 @@ fn errors_follow_the_reported_covariance_over_many_seeds() {
 #[test]
 fn flat_screen_points_match_the_truth_over_the_sensor() {
     // The issue's bound: 0.05 screen px with 1 µm stage noise, for the rays
-    // the flat reflects (a grid of 1 in 23 pixels over the sensor, those
-    // whose ray meets the Ø 150 mm flat). Beyond the flat (the sensor's
-    // corners, 120–130 mm out) the calibration extrapolates and its
-    // reported σ grows to about 0.03 px; there the test checks the errors
-    // against that σ only. Over every pixel whose reflection reaches the
-    // screen: per seed, the pixels' mean of eᵀC⁻¹e has mean 2 and a
-    // variance at most a single χ²(2)'s, 4 (an average of correlated
-    // terms), so over N seeds it is 2 ± 2/√N at worst; four of those bound it.
+    // the flat reflects, over the sensor (a grid of 1 in 23 pixels, every
+    // pixel whose reflection off the reference plane reaches the screen).
+    // Where the ray meets the Ø 150 mm flat the flat's own fringe map pins
+    // it (worst 0.012 px); beyond it (the sensor's rim, 120–130 mm out) the
+    // camera model is extrapolated from the targets, and there the reported
+    // σ is largest: 0.022 px (both axes together, 0.016 each) at the top
+    // edge, nearly all of it the camera's principal point and rotation,
+    // which trade against each other. 0.05 px is 3.2 of those σ per axis,
+    // exceeded by a 2-D Gaussian error with probability e^(−3.2²/2) =
+    // 0.7 % at that pixel, and the rim's pixels err together: a session
+    // whose worst rim pixel exceeds the bound is a few-percent event
+    // (measured: 2 of 64 other seeds, 1000–1063, up to 0.056 px). The
+    // targets at the inset sensor's edges (`make::target_layout`) made it
+    // so; with the earlier layout (cell centres, the outermost 4–12 % in
+    // from the edges) these seeds gave 0.079.
+    // So the bound is asserted on these 16 seeds, and the honesty of the
+    // reported σ over every pixel: per seed, the pixels' mean of eᵀC⁻¹e has
+    // mean 2 and a variance at most a single χ²(2)'s, 4 (an average of
+    // correlated terms), so over N seeds it is 2 ± 2/√N at worst; four of
+    // those bound it.
     let seeds = 16;
     let flat_radius_mm = SessionSpec::default().flat_radius_mm;
     let (mut normalised, mut worst_on_flat, mut worst_beyond) = (0.0, 0.0_f64, 0.0_f64);
@@ -138,7 +150,14 @@ fn flat_screen_points_match_the_truth_over_the_sensor() {
         "worst {worst_on_flat:.4} screen px on the flat, {worst_beyond:.4} beyond it; \
          mean eᵀC⁻¹e {mean:.3} over {seeds} seeds"
     );
-    assert!(worst_on_flat < 0.05, "{worst_on_flat} screen px");
+    assert!(
+        worst_on_flat < 0.05,
+        "{worst_on_flat} screen px on the flat"
+    );
+    assert!(
+        worst_beyond < 0.05,
+        "{worst_beyond} screen px beyond the flat"
+    );
     assert!(
         (mean - 2.0).abs() < 4.0 * 2.0 / (seeds as f64).sqrt(),
         "{mean}"

@@ -68,7 +68,10 @@ fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
     let truth = Station::load(&Path::new(&session).join("truth/station.toml")).unwrap();
     // The issue: flat-reflected screen points within 0.05 screen px of the
     // truth, over the sensor where the rays meet the Ø 150 mm flat.
-    let mut worst = 0.0_f64;
+    // Beyond the flat (the sensor's rim) it is printed, not asserted: this
+    // sensor's pixels are 4 × the paper's, its centroids 4 × coarser in
+    // angle (tests/calibrate_adjust.rs bounds the full sensor's rim).
+    let (mut worst, mut worst_rim) = (0.0_f64, 0.0_f64);
     for j in (0..truth.camera.height).step_by(4) {
         for i in (0..truth.camera.width).step_by(4) {
             let (Some((t, hit)), Some((c, _))) =
@@ -78,10 +81,15 @@ fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
             };
             if hit.x.hypot(hit.y) <= 75.0 {
                 worst = worst.max((t - c).norm());
+            } else {
+                worst_rim = worst_rim.max((t - c).norm());
             }
         }
     }
-    println!("flat-reflected screen points: worst {worst:.4} screen px from the truth");
+    println!(
+        "flat-reflected screen points: worst {worst:.4} screen px from the truth on the flat, \
+         {worst_rim:.4} beyond it"
+    );
     assert!(worst <= 0.05, "worst {worst} px");
 
     // A plate on the truth (5 % noise), reconstructed on the calibration.

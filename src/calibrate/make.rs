@@ -162,11 +162,48 @@ pub struct PlannedTarget {
     pub expected_px: Point2<f64>,
 }
 
-/// Target positions landing on a `grid` (columns, rows) over the sensor,
-/// inset by a tenth of it from the edges (a spot's centroid window needs
-/// room), at each of `heights_mm` above the reference plane (world z),
-/// every other height on the grid's gaps instead, so the heights fill each
-/// other's. With `frame` the positions are stage readings.
+/// Inset of the planned targets from the sensor's edges, a fraction of each
+/// side: 52 × 39 px on the paper's 1296 × 966 sensor. That leaves room for
+/// where the nominal station misplaces a spot (millimetres and tenths of a
+/// degree at 825 mm are tens of pixels), and puts targets into the sensor's
+/// corners, where the lens's distortion and the camera's pose are otherwise
+/// extrapolated: with targets 4–12 % in from the edges the flat-reflected
+/// screen points at the sensor's rim came out up to 0.079 screen px off,
+/// with these 0.044 (docs/figures.md, "Calibration").
+pub const TARGET_INSET: f64 = 0.04;
+
+/// The least inset, px: the centroid's window is ±(4σ + 1) px about the
+/// spot ([`crate::calibrate::centroid`]), 13 px for a spot of σ = 3 px,
+/// and a binned sensor's 4 % is only 10 px.
+pub const TARGET_EDGE_PX: f64 = 16.0;
+
+/// Where the targets of height number `level` land on a `width` × `height`
+/// sensor, px, row by row: even levels span the inset sensor ([`TARGET_INSET`],
+/// at least [`TARGET_EDGE_PX`]) edge to edge on a `grid` (columns, rows; 2
+/// or more each), odd ones sit in their gaps, so the heights fill each
+/// other's.
+pub fn target_layout(level: usize, grid: (u32, u32), width: u32, height: u32) -> Vec<Point2<f64>> {
+    let (nx, ny) = (grid.0.max(2), grid.1.max(2));
+    let at = |k: u32, n: u32, side: u32| {
+        let side = f64::from(side);
+        let inset = (TARGET_INSET * side).max(TARGET_EDGE_PX).min(0.5 * side);
+        let f = if level % 2 == 0 {
+            f64::from(k) / f64::from(n - 1)
+        } else {
+            (f64::from(k) + 0.5) / f64::from(n)
+        };
+        inset + (side - 2.0 * inset) * f
+    };
+    (0..ny)
+        .flat_map(|row| (0..nx).map(move |col| (col, row)))
+        .map(|(col, row)| Point2::new(at(col, nx, width), at(row, ny, height)))
+        .collect()
+}
+
+/// Target positions landing on a `grid` (columns, rows) over the sensor
+/// ([`target_layout`]: inset from the edges, every other height on the
+/// grid's gaps), at each of `heights_mm` above the reference plane (world
+/// z). With `frame` the positions are stage readings.
 ///
 /// # Errors
 /// [`MakeError::Heights`] unless the heights hold two distinct values.
@@ -183,38 +220,23 @@ pub fn plan_targets(
         });
     }
     let cam = &station.camera;
-    let (w, h) = (f64::from(cam.width), f64::from(cam.height));
-    let (nx, ny) = (grid.0.max(2), grid.1.max(2));
     let mut out = Vec::new();
     for (level, &z) in heights_mm.iter().enumerate() {
-        // Even levels span the inset sensor edge to edge, odd ones sit in
-        // their gaps.
-        let at = |k: u32, n: u32| {
-            if level % 2 == 0 {
-                f64::from(k) / f64::from(n - 1)
-            } else {
-                (f64::from(k) + 0.5) / f64::from(n)
+        for px in target_layout(level, grid, cam.width, cam.height) {
+            let d = cam.ray_through(px.x, px.y);
+            // The ray C + t d meets the plane z = height.
+            let t = (z - cam.position_mm.z) / d.z;
+            if !(t.is_finite() && t > 0.0) {
+                continue;
             }
-        };
-        for row in 0..ny {
-            for col in 0..nx {
-                let (fx, fy) = (at(col, nx), at(row, ny));
-                let px = Point2::new(w * (0.1 + 0.8 * fx), h * (0.1 + 0.8 * fy));
-                let d = cam.ray_through(px.x, px.y);
-                // The ray C + t d meets the plane z = height.
-                let t = (z - cam.position_mm.z) / d.z;
-                if !(t.is_finite() && t > 0.0) {
-                    continue;
-                }
-                let world = cam.position_mm + d.into_inner() * t;
-                let expected = cam.project(&world).unwrap_or(px);
-                let stage = frame.map_or(world, |f| f.to_stage(&world));
-                out.push(PlannedTarget {
-                    stage_mm: stage,
-                    world_mm: world,
-                    expected_px: expected,
-                });
-            }
+            let world = cam.position_mm + d.into_inner() * t;
+            let expected = cam.project(&world).unwrap_or(px);
+            let stage = frame.map_or(world, |f| f.to_stage(&world));
+            out.push(PlannedTarget {
+                stage_mm: stage,
+                world_mm: world,
+                expected_px: expected,
+            });
         }
     }
     Ok(out)
@@ -349,9 +371,36 @@ mod tests {
         for (k, t) in planned.iter().enumerate() {
             assert!((t.world_mm.z - [0.0, 25.0, 50.0][k / 12]).abs() < 1e-9);
             let p = station.camera.project(&t.world_mm).unwrap();
-            // Inset by a tenth of the sensor: the centroid window has room.
-            assert!((0.1 * w - 1e-6..=0.9 * w + 1e-6).contains(&p.x), "{p}");
-            assert!((0.1 * h - 1e-6..=0.9 * h + 1e-6).contains(&p.y), "{p}");
+            // Inset by TARGET_INSET (here more than TARGET_EDGE_PX): the
+            // centroid window has room.
+            let (lo, hi) = (TARGET_INSET - 1e-9, 1.0 - TARGET_INSET + 1e-9);
+            assert!((lo * w..=hi * w).contains(&p.x), "{p}");
+            assert!((lo * h..=hi * h).contains(&p.y), "{p}");
+        }
+        // The even heights reach the inset sensor's four corners.
+        let corners = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]];
+        for [cx, cy] in corners {
+            let want = Point2::new(
+                w * (TARGET_INSET + (1.0 - 2.0 * TARGET_INSET) * cx),
+                h * (TARGET_INSET + (1.0 - 2.0 * TARGET_INSET) * cy),
+            );
+            for level in [0, 2] {
+                let hit = planned[12 * level..12 * (level + 1)]
+                    .iter()
+                    .any(|t| (t.expected_px - want).norm() < 1e-6);
+                assert!(hit, "no target of height {level} at corner {want}");
+            }
+        }
+        // A small (binned) sensor keeps TARGET_EDGE_PX from every edge.
+        for p in target_layout(0, (3, 3), 324, 241) {
+            assert!(
+                p.x >= TARGET_EDGE_PX && p.x <= 324.0 - TARGET_EDGE_PX,
+                "{p}"
+            );
+            assert!(
+                p.y >= TARGET_EDGE_PX && p.y <= 241.0 - TARGET_EDGE_PX,
+                "{p}"
+            );
         }
         // No two targets of one height share a pixel.
         for level in planned.chunks(12) {

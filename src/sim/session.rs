@@ -16,6 +16,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use super::SimError;
 use crate::calibrate::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
+use crate::calibrate::make::target_layout;
 use crate::calibrate::params::{prior, WorldFrame, COVER_GLASS_PRIOR_MM};
 use crate::calibrate::screen_mark::mark_focus;
 use crate::calibrate::session_file::{
@@ -154,14 +155,10 @@ fn targets(
     let cam = &truth.camera;
     let [nx, ny] = spec.targets_grid;
     let mut out = Vec::new();
+    // The operator's layout (`mfd calibrate targets`), placed by the truth.
     for (layer, &h) in spec.target_heights_mm.iter().enumerate() {
-        for k in 0..nx * ny {
-            // Layers interleave on the sensor (a half-cell shift per layer).
-            let fx = (f64::from(k % nx) + 0.5 + 0.3 * layer as f64) / f64::from(nx);
-            let fy = (f64::from(k / nx) + 0.5 + 0.2 * layer as f64) / f64::from(ny);
-            let x = f64::from(cam.width) * (0.02 + 0.96 * fx.fract());
-            let y = f64::from(cam.height) * (0.02 + 0.96 * fy.fract());
-            let Some(world) = on_plane(truth, x, y, h) else {
+        for at in target_layout(layer, (nx, ny), cam.width, cam.height) {
+            let Some(world) = on_plane(truth, at.x, at.y, h) else {
                 continue;
             };
             let Some(px) = cam.project(&world) else {
