@@ -15,6 +15,10 @@ use mfd::acquire::acquisition::Acquisition;
 use mfd::acquire::camera::aravis_fake::FakeStation;
 use mfd::acquire::camera::{Camera, CameraConfig, StreamStatistics, TriggerMode};
 use mfd::acquire::patterns::Schedule;
+use mfd::calibrate::centroid::centroid_of_file;
+use mfd::calibrate::frame::WorldFrame;
+use mfd::calibrate::make::plan_targets;
+use mfd::calibrate::session_file::SessionFile;
 use mfd::live::{acquire, Counters, FrameSink, Recorder, SequencerConfig, Session};
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
@@ -245,4 +249,98 @@ fn measure_shows_a_designed_schedule_over_the_fake_camera() {
             "frame {k}"
         );
     }
+}
+
+/// Runs `mfd` and returns its output, failing with what it printed.
+fn mfd_ok(args: &[&str]) -> String {
+    let run = common::mfd(args);
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "mfd {args:?}:\n{log}");
+    log
+}
+
+#[test]
+fn calibrate_capture_takes_target_frames_over_the_fake_camera() {
+    // `mfd calibrate capture --camera aravis:fake`: the simulated target
+    // (a spot where the nominal station images the stage reading, through
+    // the frame the session's flat points define) served over GigE Vision.
+    // Each frame crosses the real protocol into targets/NNN.png, its entry
+    // is appended, and its centroid must sit where the plan put the target.
+    let _turn = LOOPBACK.lock().unwrap_or_else(|p| p.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("session");
+    let nominal = common::repo("calib/paper-sim.toml");
+    mfd_ok(&[
+        "calibrate",
+        "template",
+        session.to_str().unwrap(),
+        "--nominal",
+        nominal.to_str().unwrap(),
+    ]);
+    // Flat points at the reference plane, the stage's axes those of the
+    // world: the session's frame is the nominal world frame.
+    let toml = session.join("session.toml");
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    let flat: Vec<nalgebra::Point3<f64>> = (0..9)
+        .map(|k| {
+            let (x, y) = (f64::from(k % 3) - 1.0, f64::from(k / 3) - 1.0);
+            nalgebra::Point3::new(40.0 * x, 40.0 * y, 0.0)
+        })
+        .collect();
+    for p in &flat {
+        text.push_str(&format!(
+            "\n[[flat_point]]\nstage_mm = [{}, {}, {}]\n",
+            p.x, p.y, p.z
+        ));
+    }
+    std::fs::write(&toml, text).unwrap();
+    let station = Station::load(&nominal).unwrap();
+    let frame = WorldFrame::from_flat_points(&flat, [0.0, 0.0], 1e-3).unwrap();
+    let planned = plan_targets(&station, Some(&frame), &[0.0, 30.0], (2, 2)).unwrap();
+    assert_eq!(planned.len(), 8);
+    let size = Some((station.camera.width, station.camera.height));
+    for (k, t) in planned.iter().enumerate() {
+        let s = t.stage_mm;
+        let stage = format!("{},{},{}", s.x, s.y, s.z);
+        let log = mfd_ok(&[
+            "calibrate",
+            "capture",
+            session.to_str().unwrap(),
+            "--stage-mm",
+            &stage,
+            "--camera",
+            "aravis:fake",
+            "--exposure-us",
+            "500",
+        ]);
+        assert!(
+            log.contains(&format!("target_point[{k}]: wrote targets/{k:03}.png")),
+            "{log}"
+        );
+        let png = session.join(format!("targets/{k:03}.png"));
+        let c = centroid_of_file(&png, &format!("target_point[{k}]"), size).unwrap();
+        // Found within 5σ of its own centroid σ (2-D: exceeded with
+        // probability e^-12.5) of where the plan put it.
+        let err = (c.position_px - t.expected_px).norm();
+        let sd = c.std_px()[0].max(c.std_px()[1]);
+        assert!(err < 5.0 * sd, "target {k}: {err} px off, σ {sd} px");
+    }
+    let file: SessionFile = toml::from_str(&std::fs::read_to_string(&toml).unwrap()).unwrap();
+    assert_eq!(file.target_point.len(), planned.len());
+    // A stage reading that puts the spot off the sensor is named.
+    let run = common::mfd(&[
+        "calibrate",
+        "capture",
+        session.to_str().unwrap(),
+        "--stage-mm",
+        "900,0,0",
+        "--camera",
+        "aravis:fake",
+    ]);
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(log.contains("target_point[8]"), "{log}");
 }

@@ -12,7 +12,7 @@ use nalgebra::{Point2, Point3};
 use super::centroid::{centroid_of_file, Centroid, CentroidError};
 use super::frame::WorldFrame;
 use super::session::{read_file, session_toml, SessionError};
-use crate::acquire::camera::{Camera, CameraConfig, CameraError};
+use crate::acquire::camera::{Camera, CameraConfig, CameraError, Frame, TriggerMode};
 use crate::formats::image_io::{self, ImageError};
 use crate::optics::station::Station;
 
@@ -256,8 +256,33 @@ pub struct Captured {
     pub predicted_px: Option<Point2<f64>>,
 }
 
+/// The first complete frame within `timeout`: a frame the camera delivers
+/// incomplete (a GigE Vision stream that lost packets, or one started in
+/// the middle of a frame) is passed over with a warning, and the next one
+/// taken (triggered again when `trigger` is software).
+fn next_good_frame(
+    camera: &mut dyn Camera,
+    trigger: TriggerMode,
+    timeout: Duration,
+) -> Result<Frame, CameraError> {
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        if trigger == TriggerMode::Software {
+            camera.trigger()?;
+        }
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match camera.next_frame(left) {
+            Err(e @ CameraError::BadFrame { .. }) if !left.is_zero() => {
+                log::warn!("{e}; taking the next frame");
+            }
+            other => return other,
+        }
+    }
+}
+
 /// Grabs one frame of the target at `stage_mm` from `camera` (configured
-/// with `config`, software-triggered), writes it as `targets/NNN.png`,
+/// with `config`: software-triggered, or free running where the camera
+/// ignores software triggers), writes it as `targets/NNN.png`,
 /// appends its `[[target_point]]` to the session's `session.toml`, and
 /// finds its centroid.
 ///
@@ -283,9 +308,21 @@ pub fn capture_target(
         }
         n += 1;
     };
-    camera.configure(config)?;
+    // A camera that ignores software triggers runs free: the first frame
+    // its stream delivers after `start` was exposed after the call, so it
+    // shows the target where it stands now.
+    let software = camera.describe().software_trigger;
+    let config = CameraConfig {
+        trigger: if software {
+            config.trigger
+        } else {
+            TriggerMode::FreeRunning
+        },
+        ..config.clone()
+    };
+    camera.configure(&config)?;
     camera.start()?;
-    let frame = camera.trigger().and_then(|()| camera.next_frame(timeout));
+    let frame = next_good_frame(camera, config.trigger, timeout);
     if let Err(e) = camera.stop() {
         log::warn!("stopping the camera after the capture: {e}");
     }

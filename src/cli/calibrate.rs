@@ -89,7 +89,9 @@ struct CaptureArgs {
     )]
     stage_mm: Vec<f64>,
     /// Camera: `sim` (a simulated target where the nominal station puts
-    /// it), `aravis` (first found), `aravis:ID`, `v4l:/dev/videoN`.
+    /// it), `aravis` (first found), `aravis:ID`, `aravis:fake` (the
+    /// simulated target behind a GigE Vision fake camera on loopback),
+    /// `v4l:/dev/videoN`.
     #[arg(long, default_value = "sim")]
     camera: String,
     /// Exposure time, µs (the device's value when omitted).
@@ -259,12 +261,10 @@ fn capture(args: &CaptureArgs) -> anyhow::Result<()> {
         .filter(|s: &[f64; 3]| s.iter().all(|v| v.is_finite()))
         .context("--stage-mm: expected three finite numbers X,Y,Z in mm")?;
     let spec: CameraSpec = args.camera.parse()?;
-    let mut camera: Box<dyn camera::Camera> = match &spec {
-        CameraSpec::Sim => Box::new(simulated_target(args, stage)?),
-        s if s.is_simulated() => {
-            anyhow::bail!("--camera {}: serves the fringe simulation; use `--camera sim` for a simulated target", args.camera)
-        }
-        s => camera::open(s, None)?,
+    let mut camera = if spec.is_simulated() {
+        camera::open_for_target(&spec, simulated_target(args, stage)?)?
+    } else {
+        camera::open(&spec, None)?
     };
     let config = CameraConfig {
         exposure_us: args.exposure_us,

@@ -108,6 +108,17 @@ impl SpotCamera {
             sequence: 0,
         }
     }
+
+    /// The scene it shows.
+    pub fn scene(&self) -> &SpotScene {
+        &self.scene
+    }
+
+    /// One frame of the scene with fresh noise, row-major counts (what
+    /// [`Camera::next_frame`] delivers, for a feed that serves it elsewhere).
+    pub fn render(&mut self) -> Vec<u16> {
+        render_spot(&self.scene, &mut self.rng)
+    }
 }
 
 impl Camera for SpotCamera {
@@ -165,7 +176,7 @@ impl Camera for SpotCamera {
         }
         self.sequence += 1;
         Ok(Frame {
-            data: render_spot(&self.scene, &mut self.rng),
+            data: self.render(),
             width: self.scene.resolution.0,
             height: self.scene.resolution.1,
             bit_depth: self.scene.bit_depth,

@@ -25,7 +25,7 @@ use super::TriggerMode;
 use super::{Camera, CameraConfig, CameraError, CameraInfo, Frame, PixelFormat, Region};
 // The `aravis:fake` selection point: the one place this module reaches
 // into the simulated station.
-use crate::sim::{GigeFeed, ScreenState, SimulatedCamera};
+use crate::sim::{GigeFeed, ScreenState, SimulatedCamera, SpotCamera};
 
 /// Tags kept (frames the client may still have queued).
 const TAGS_KEPT: usize = 1024;
@@ -116,7 +116,20 @@ impl FakeStation {
     /// [`CameraError::Device`] when the fake camera cannot bind loopback
     /// (another one running?) or the client cannot reach it.
     pub fn start(sim: SimulatedCamera) -> Result<Self, CameraError> {
-        let feed = GigeFeed::new(sim);
+        Self::serve(GigeFeed::new(sim))
+    }
+
+    /// Starts the fake camera on `lo`, serving a calibration target's
+    /// frames (`mfd calibrate capture --camera aravis:fake`), and connects.
+    ///
+    /// # Errors
+    /// As [`FakeStation::start`].
+    pub fn start_target(target: SpotCamera) -> Result<Self, CameraError> {
+        Self::serve(GigeFeed::target(target))
+    }
+
+    /// Starts the fake camera on `lo`, serving `feed`, and connects.
+    fn serve(feed: GigeFeed) -> Result<Self, CameraError> {
         let (w, h) = feed.resolution();
         let format = feed.pixel_format();
         let serial = format!("MFD{}", std::process::id());
@@ -174,8 +187,9 @@ impl FakeStation {
         self.server.set_gvsp_lost_ratio(ratio.clamp(0.0, 1.0));
     }
 
-    /// The screen the simulated camera behind the fake looks at.
-    pub fn screen(&self) -> &ScreenState {
+    /// The screen the simulated camera behind the fake looks at; `None`
+    /// when it serves a target.
+    pub fn screen(&self) -> Option<&ScreenState> {
         self.fill.feed.screen()
     }
 }

@@ -30,7 +30,7 @@ use std::time::{Duration, Instant};
 
 pub use error::CameraError;
 // The `--camera sim` selection point (see `open`).
-use crate::sim::SimulatedCamera;
+use crate::sim::{SimulatedCamera, SpotCamera};
 
 /// Pixel formats the backends deliver (all stored as `u16` counts).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -295,6 +295,26 @@ pub fn open(
             backend: "v4l".into(),
             feature: "v4l",
         }),
+    }
+}
+
+/// Opens the camera `spec` names for a calibration target: `sim` is
+/// `target` itself, `aravis:fake` serves `target`'s frames over GigE Vision
+/// on loopback, real devices ignore it.
+///
+/// # Errors
+/// As [`open`].
+pub fn open_for_target(
+    spec: &CameraSpec,
+    target: SpotCamera,
+) -> Result<Box<dyn Camera>, CameraError> {
+    match spec {
+        CameraSpec::Sim => Ok(Box::new(target)),
+        #[cfg(feature = "aravis")]
+        CameraSpec::Aravis(Some(id)) if id == "fake" => {
+            Ok(Box::new(aravis_fake::FakeStation::start_target(target)?))
+        }
+        real => open(real, None),
     }
 }
 
