@@ -349,19 +349,26 @@ fn admissible(
         // that fit's convergence from the flat plate, on the pixels it
         // takes (those the stage detected fringes on); per-pixel
         // separability is not needed.
-        let kappa = opts.plan.radiometry.tau_max.powi(-2);
+        let both = sample_pixels(&views.flat, super::predict::CONVERGENCE_PIXELS, true);
         let c = converge::convergence(
             station,
             frames,
-            &design.directions_deg,
-            kappa,
+            &converge::Scene {
+                design: &design,
+                flat: &views.flat,
+                bent: &views.bent,
+                pixels: &both,
+                gain: opts.plan.radiometry.gain(&views.flat),
+                radiometry: &opts.plan.radiometry,
+            },
             views.spread_px,
         );
         let why = super::predict::surface_domain_unmeasurable(&c, &stage);
         log::debug!(
-            "design candidate of {} frames: surface-domain basin {:?} px against the prior's {:.1} px, no signal on {:.2}: {why:?}",
+            "design candidate of {} frames: surface-domain basin {:?} px against the prior's {:.1} px, pixels {:.2}, no signal on {:.2}: {why:?}",
             frames.len(),
             c.directions.iter().map(|d| d.basin_px).collect::<Vec<_>>(),
+            c.pixel_fraction,
             views.spread_px,
             stage.no_signal_fraction,
         );

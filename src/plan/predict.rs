@@ -249,6 +249,10 @@ pub fn run_stage(
 /// same every time it is made.
 pub const STAGE_SEED: u64 = 0x005e_ed17;
 
+/// Sample pixels the surface-domain fit's iteration is run on
+/// ([`converge::pixels_converge`]).
+pub const CONVERGENCE_PIXELS: usize = 64;
+
 /// Sample pixels the stage is run on by [`predict`].
 pub const STAGE_PIXELS: usize = 64;
 
@@ -343,7 +347,20 @@ pub fn predict(
     let stage = run_stage(station, &design, &view, &bent, STAGE_PIXELS, opts)?;
     let (bound, separation_bins) = bound_kind(&design, &view, opts);
     let kappa = opts.radiometry.tau_max.powi(-2);
-    let convergence = converge::convergence(station, frames, &design.directions_deg, kappa, spread);
+    let both_sample = sample_pixels(&view, CONVERGENCE_PIXELS, true);
+    let convergence = converge::convergence(
+        station,
+        frames,
+        &converge::Scene {
+            design: &design,
+            flat: &view,
+            bent: &bent,
+            pixels: &both_sample,
+            gain,
+            radiometry: &opts.radiometry,
+        },
+        spread,
+    );
     let not_measurable_because = match bound {
         BoundKind::PerPixel => (!stage.measurable).then(|| {
             format!(
@@ -431,8 +448,10 @@ pub fn surface_domain_unmeasurable(c: &Convergence, stage: &StageCheck) -> Optio
             .map(|d| d.basin_px)
             .fold(f64::INFINITY, f64::min);
         return Some(format!(
-            "the reflections are too close to separate pixel by pixel, and the surface-domain fit started from the flat plate converges only from {worst:.1} px of the truth, less than the prior's spread of {:.1} px: add frames at low τ",
-            c.prior_spread_px
+            "the reflections are too close to separate pixel by pixel, and the surface-domain fit started from the flat plate does not reach the truth from the prior's spread of {:.1} px (one reflection: from {worst:.1} px; both, noise-free: on {:.0} % of the sample pixels, needs {:.0} %): add frames at low τ, or start from a closer prior",
+            c.prior_spread_px,
+            100.0 * c.pixel_fraction,
+            100.0 * converge::PIXEL_FRACTION
         ));
     }
     (stage.no_signal_fraction > 1.0 - stage::STAGE_FRACTION).then(|| {
