@@ -289,17 +289,24 @@ fn print_summary(p: &Prediction) {
         st.pixels,
         100.0 * st.found_fraction
     );
-    let c = &p.convergence;
-    for d in &c.directions {
+    if p.bound == mfd::plan::BoundKind::SurfaceDomain {
+        let c = &p.convergence;
+        for d in &c.directions {
+            println!(
+                "direction {:+.0}°: the surface-domain fit converges from ±{:.1} px of the truth{} (one reflection)",
+                d.direction_deg,
+                d.basin_px,
+                if d.basin_px >= 2.0 * c.prior_spread_px {
+                    " or more"
+                } else {
+                    ""
+                }
+            );
+        }
         println!(
-            "direction {:+.0}°: the surface-domain fit converges from ±{:.1} px of the truth{}",
-            d.direction_deg,
-            d.basin_px,
-            if d.basin_px >= 2.0 * c.prior_spread_px {
-                " or more"
-            } else {
-                ""
-            }
+            "the surface-domain fit's iteration from the flat plate reaches the truth on {:.0} % of the sample pixels (needs {:.0} %)",
+            100.0 * c.pixel_fraction,
+            100.0 * mfd::plan::converge::PIXEL_FRACTION
         );
     }
     if let Some(why) = &p.not_measurable_because {

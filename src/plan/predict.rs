@@ -3,9 +3,10 @@
 //! screen points under the schedule ([`crate::budget::scene::bound_map`],
 //! the simulator's radiometry), the noise-free reconstruction whose
 //! covariance is the bound of the Zernike coefficients (the surface
-//! solver's own normal equations), whether the per-pixel stage can
-//! separate the two reflections, whether its start is unambiguous, and the
-//! acquisition time.
+//! solver's own normal equations), which estimator `auto` will use
+//! ([`bound_kind`]), whether it will measure (per-pixel: the stage finds
+//! and separates the two reflections; surface-domain: the fit converges
+//! from the flat plate, [`super::converge`]), and the acquisition time.
 
 use serde::Serialize;
 
