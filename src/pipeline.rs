@@ -37,7 +37,9 @@ pub mod result_dir;
 mod station_uncertainty;
 
 pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
-pub use estimator::{withheld, DirectReport, Estimator};
+pub use estimator::{
+    surface_domain_preferred, withheld, DirectReport, Estimator, DIRECT_BELOW_BINS,
+};
 pub use result_dir::{InputFile, Inputs, Staged};
 
 use crate::budget::assemble::budget;

@@ -238,9 +238,13 @@ fn print_summary(p: &Prediction) {
         "{} frames ({} patterns shown), {:.1} s of acquisition",
         p.frames, p.patterns_shown, p.seconds
     );
+    let bound = match p.bound {
+        mfd::plan::BoundKind::PerPixel => "per-pixel bound",
+        mfd::plan::BoundKind::SurfaceDomain => "surface-domain bound",
+    };
     println!(
-        "predicted RMS error (Cramér–Rao, per-pixel bound): front {:.3} nm",
-        p.front.rms_nm
+        "predicted RMS error (Cramér–Rao, {bound}; reflections {:.2} bins apart): front {:.3} nm",
+        p.separation_bins, p.front.rms_nm
     );
     match (&p.back, &p.back_not_measured_because) {
         (Some(b), _) => println!(
@@ -285,6 +289,26 @@ fn print_summary(p: &Prediction) {
         st.pixels,
         100.0 * st.found_fraction
     );
+    if p.bound == mfd::plan::BoundKind::SurfaceDomain {
+        let c = &p.convergence;
+        for d in &c.directions {
+            println!(
+                "direction {:+.0}°: the surface-domain fit converges from ±{:.1} px of the truth{} (one reflection)",
+                d.direction_deg,
+                d.basin_px,
+                if d.basin_px >= 2.0 * c.prior_spread_px {
+                    " or more"
+                } else {
+                    ""
+                }
+            );
+        }
+        println!(
+            "the surface-domain fit's iteration from the flat plate reaches the truth on {:.0} % of the sample pixels (needs {:.0} %)",
+            100.0 * c.pixel_fraction,
+            100.0 * mfd::plan::converge::PIXEL_FRACTION
+        );
+    }
     if let Some(why) = &p.not_measurable_because {
         println!("NOT MEASURABLE: {why}");
     }

@@ -42,6 +42,15 @@ pub enum Estimator {
 /// (10 mm, n = 2.2): both at 1.1×. Between those, 0.75.
 pub const DIRECT_BELOW_BINS: f64 = 0.75;
 
+/// Whether the reflections, `median_bins` apart
+/// ([`direct::median_separation_bins`]), are close enough for `auto` to fit
+/// the surfaces to the frames: the one rule `auto` and `mfd plan` (which
+/// bound a schedule is predicted with) share. False for NaN (no pixel sees
+/// two reflections).
+pub fn surface_domain_preferred(median_bins: f64) -> bool {
+    median_bins < DIRECT_BELOW_BINS
+}
+
 /// What the surface-domain fit did, for `summary.json` and the maps.
 #[derive(Debug, Clone)]
 pub struct DirectReport {
@@ -86,7 +95,7 @@ pub(super) fn surfaces_from_frames(
     let cov = maps.screen_cov();
     let obs = Observations::from_maps(station, &maps.screen_coords(), Uncertainty::Cov(&cov))?;
     let per_pixel = solve_surfaces(&obs, station, opts);
-    let close = direct::median_separation_bins(solver) < DIRECT_BELOW_BINS;
+    let close = surface_domain_preferred(direct::median_separation_bins(solver));
     let wanted = match estimator {
         Estimator::PerPixel => false,
         Estimator::Direct => true,

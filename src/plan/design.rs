@@ -37,7 +37,17 @@
 //! is measured by the spectral stage itself ([`super::stage`]: its search
 //! and fit run on sample pixels at the planned noise find the true points,
 //! so an alias outside the range the stage searches costs nothing) and is
-//! separable by the stage's 5σ rule.
+//! separable by the stage's 5σ rule. Where the reflections are closer than
+//! `--estimator auto`'s rule (a thin plate: the surface-domain fit, not the
+//! stage, makes the surfaces) the constraint is instead that fit's
+//! convergence from the flat plate ([`super::converge`]: every start
+//! within the prior's spread inside the basin of its Gauss–Newton
+//! iteration) and the stage's fringe detection on at least nine in ten of
+//! the sample pixels (the fit takes only the pixels the stage detected
+//! fringes on). The A-optimum alone of a 3 mm plate (τ ≈ 90–115 and
+//! 225–250) meets the first and fails the second: the periodogram found
+//! no fringes on 92 % of the sample pixels, and the fit on the rest missed
+//! its prediction fourfold.
 
 use crate::acquire::acquisition::FrameInfo;
 use crate::budget::scene;
@@ -45,7 +55,10 @@ use crate::optics::station::Station;
 use crate::solve::spectral::model::{normal_equations, Design};
 
 use super::ambiguity;
-use super::predict::{predict, run_stage, sample_pixels, separation, traced_view, Prediction};
+use super::converge;
+use super::predict::{
+    bound_kind, predict, run_stage, sample_pixels, separation, traced_view, BoundKind, Prediction,
+};
 use super::{invalid, PlanError, PlanOptions};
 use crate::optics::trace::TracedView;
 
@@ -288,6 +301,10 @@ struct Views {
     /// The expected plate ([`ambiguity::expected_view`]): the truth the
     /// stage is run on.
     bent: TracedView,
+    /// How far the true points may lie from the flat plate's, px
+    /// ([`ambiguity::spread_between`]): the start the surface-domain fit
+    /// must converge from.
+    spread_px: f64,
 }
 
 /// Largest τ of the start component tried, in units of τ_max (the whole
@@ -303,7 +320,8 @@ const BISECTIONS: usize = 2;
 /// run on sample pixels at the planned noise, finds the true points
 /// ([`super::stage`]; this is the start's ambiguity as the stage meets it,
 /// within the range it searches), and the reflections are separable by
-/// the stage's 5σ rule.
+/// the stage's 5σ rule; where the bound is the surface-domain fit's, that
+/// the fit converges from the flat plate ([`super::converge`]).
 fn admissible(
     station: &Station,
     frames: &[FrameInfo],
@@ -326,6 +344,36 @@ fn admissible(
         super::predict::STAGE_PIXELS,
         &opts.plan,
     )?;
+    if bound_kind(&design, &views.flat, &opts.plan).0 == BoundKind::SurfaceDomain {
+        // `auto` will fit the surfaces to the frames: what must hold is
+        // that fit's convergence from the flat plate, on the pixels it
+        // takes (those the stage detected fringes on); per-pixel
+        // separability is not needed.
+        let both = sample_pixels(&views.flat, super::predict::CONVERGENCE_PIXELS, true);
+        let c = converge::convergence(
+            station,
+            frames,
+            &converge::Scene {
+                design: &design,
+                flat: &views.flat,
+                bent: &views.bent,
+                pixels: &both,
+                gain: opts.plan.radiometry.gain(&views.flat),
+                radiometry: &opts.plan.radiometry,
+            },
+            views.spread_px,
+        );
+        let why = super::predict::surface_domain_unmeasurable(&c, &stage);
+        log::debug!(
+            "design candidate of {} frames: surface-domain basin {:?} px against the prior's {:.1} px, pixels {:.2}, no signal on {:.2}: {why:?}",
+            frames.len(),
+            c.directions.iter().map(|d| d.basin_px).collect::<Vec<_>>(),
+            c.pixel_fraction,
+            views.spread_px,
+            stage.no_signal_fraction,
+        );
+        return Ok(why.is_none());
+    }
     let gain = opts.plan.radiometry.gain(&views.flat);
     let both = sample_pixels(&views.flat, 64, true);
     let sep = stage
@@ -468,9 +516,13 @@ pub fn design(
     }
     let (prob, _) = problem(station, opts)?;
     let opt = prob.optimum(opts.iterations)?;
+    let flat = traced_view(station, opts.plan.back_scale)?;
+    let bent = ambiguity::expected_view(station, &opts.plan)?;
+    let spread_px = ambiguity::spread_between(&flat, &bent, &opts.plan);
     let views = Views {
-        flat: traced_view(station, opts.plan.back_scale)?,
-        bent: ambiguity::expected_view(station, &opts.plan)?,
+        flat,
+        bent,
+        spread_px,
     };
     let min_frames = 8 * opts.directions_deg.len();
     let worst = |d: &Designed| {

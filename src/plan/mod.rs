@@ -5,14 +5,19 @@
 //!   the two reflections are separable and the fit's start unambiguous, and
 //!   the acquisition time. The bound is the per-pixel one (the spectral
 //!   stage's bound at the traced flat plate, propagated through the surface
-//!   solver's normal equations, as `mfd budget` does); [`BoundKind`] says
-//!   which, so that a surface-domain bound can be added beside it.
+//!   solver's normal equations, as `mfd budget` does) where the reflections
+//!   are far enough apart for `--estimator auto` to take the per-pixel
+//!   route, and the surface-domain fit's global bound where they are not
+//!   ([`BoundKind`]); measurable means the spectral stage finds the true
+//!   points (per-pixel) or the surface-domain fit converges from the flat
+//!   plate ([`converge`]).
 //! - [`design`]: the schedule for a budget of frames, seconds or a target
 //!   error ([`design::design`]).
 //! - [`timing`]: seconds of an acquisition at the display's settle time and
 //!   the camera's frame period.
 
 pub mod ambiguity;
+pub mod converge;
 pub mod design;
 pub mod predict;
 pub mod stage;
@@ -20,6 +25,7 @@ pub mod timing;
 
 use std::path::PathBuf;
 
+pub use converge::Convergence;
 pub use design::{design, Budget, DesignOptions, Designed};
 pub use predict::{predict, BoundKind, Prediction, Separation, SurfacePrediction};
 pub use stage::StageCheck;

@@ -3,9 +3,10 @@
 //! screen points under the schedule ([`crate::budget::scene::bound_map`],
 //! the simulator's radiometry), the noise-free reconstruction whose
 //! covariance is the bound of the Zernike coefficients (the surface
-//! solver's own normal equations), whether the per-pixel stage can
-//! separate the two reflections, whether its start is unambiguous, and the
-//! acquisition time.
+//! solver's own normal equations), which estimator `auto` will use
+//! ([`bound_kind`]), whether it will measure (per-pixel: the stage finds
+//! and separates the two reflections; surface-domain: the fit converges
+//! from the flat plate, [`super::converge`]), and the acquisition time.
 
 use serde::Serialize;
 
@@ -20,6 +21,7 @@ use crate::solve::spectral::pixel::RESOLVE_SIGMAS;
 use crate::solve::surfaces::{reconstruct, Observations, Uncertainty};
 
 use super::ambiguity::{self, Ambiguity};
+use super::converge::{self, Convergence};
 use super::stage::{self, StageCheck};
 use super::{invalid, PlanError, PlanOptions};
 
@@ -37,6 +39,34 @@ pub enum BoundKind {
     /// propagated through the surface solver: what the two-stage estimator
     /// can reach. Needs the reflections separable per pixel.
     PerPixel,
+    /// The surface-domain fit's global bound ([`crate::solve::direct`]):
+    /// every pixel's full 4×4 bound of `(u1, v1, u2, v2)` (all its
+    /// parameters free, however close the reflections) through the surface
+    /// solver's normal equations, as `budget::scene` and `mfd bench thin`
+    /// compute it. Used where the reflections are closer than
+    /// `--estimator auto`'s rule ([`crate::pipeline::surface_domain_preferred`]),
+    /// i.e. where `auto` will fit the surfaces to the frames.
+    SurfaceDomain,
+}
+
+/// Which bound a schedule of `design` is predicted with on the traced
+/// flat plate `view`, and the median front–back separation in Fourier
+/// bins it is decided on: `auto`'s own rule on the stage's candidate
+/// pixels, so that the plan and the reconstruction choose alike.
+pub fn bound_kind(design: &Design, view: &TracedView, opts: &PlanOptions) -> (BoundKind, f64) {
+    let candidates =
+        crate::solve::spectral::prior_candidates(view, i64::from(opts.spectral.margin_px));
+    let bins = crate::solve::direct::median_separation_bins_of(
+        design,
+        view,
+        candidates.iter().map(|&c| c as usize),
+    );
+    let kind = if crate::pipeline::surface_domain_preferred(bins) {
+        BoundKind::SurfaceDomain
+    } else {
+        BoundKind::PerPixel
+    };
+    (kind, bins)
 }
 
 /// The bound of one surface.
@@ -94,6 +124,9 @@ pub struct Prediction {
     pub seconds: f64,
     /// The bound used.
     pub bound: BoundKind,
+    /// Median front–back separation over the pixels, Fourier bins of the
+    /// schedule's τ span (NaN with one reflection): what decides `bound`.
+    pub separation_bins: f64,
     /// The front surface.
     pub front: SurfacePrediction,
     /// The back surface; `None` when it is not measured (AR-coated, or the
@@ -109,8 +142,15 @@ pub struct Prediction {
     /// The spectral stage run on sample pixels at the planned noise
     /// ([`stage::stage_check`]): whether it finds the true points.
     pub stage: StageCheck,
-    /// Why the stage will not measure this schedule, in an operator's
-    /// words; `None` when it will ([`StageCheck::measurable`]).
+    /// The surface-domain fit's convergence from the flat plate
+    /// ([`converge::convergence`]): the measurability rule where the bound
+    /// is [`BoundKind::SurfaceDomain`], a diagnostic elsewhere.
+    pub convergence: Convergence,
+    /// Why the estimator will not measure this schedule, in an operator's
+    /// words; `None` when it will (the per-pixel route:
+    /// [`StageCheck::measurable`]; the surface-domain fit:
+    /// [`Convergence::converges`] and signal detected on the stage's
+    /// sample pixels).
     pub not_measurable_because: Option<String>,
     /// The block size the bound was evaluated on, camera px.
     pub bound_stride_px: usize,
@@ -210,6 +250,10 @@ pub fn run_stage(
 /// same every time it is made.
 pub const STAGE_SEED: u64 = 0x005e_ed17;
 
+/// Sample pixels the surface-domain fit's iteration is run on
+/// ([`converge::pixels_converge`]).
+pub const CONVERGENCE_PIXELS: usize = 64;
+
 /// Sample pixels the stage is run on by [`predict`].
 pub const STAGE_PIXELS: usize = 64;
 
@@ -302,25 +346,43 @@ pub fn predict(
     let bent = ambiguity::expected_view(station, opts)?;
     let spread = ambiguity::spread_between(&view, &bent, opts);
     let stage = run_stage(station, &design, &view, &bent, STAGE_PIXELS, opts)?;
-    let not_measurable_because = (!stage.measurable).then(|| {
-        format!(
-            "the spectral stage ({} engine), run on {} sample pixels at this noise, found the true points on {:.0} % of them (needs {:.0} %; no signal detected on {:.0} %): give more frames or spread τ wider",
-            stage.engine,
-            stage.pixels,
-            100.0 * stage.found_fraction,
-            100.0 * stage::STAGE_FRACTION,
-            100.0 * stage.no_signal_fraction
-        )
-    });
-    let sample = sample_pixels(&view, 200, false);
+    let (bound, separation_bins) = bound_kind(&design, &view, opts);
     let kappa = opts.radiometry.tau_max.powi(-2);
+    let both_sample = sample_pixels(&view, CONVERGENCE_PIXELS, true);
+    let convergence = converge::convergence(
+        station,
+        frames,
+        &converge::Scene {
+            design: &design,
+            flat: &view,
+            bent: &bent,
+            pixels: &both_sample,
+            gain,
+            radiometry: &opts.radiometry,
+        },
+        spread,
+    );
+    let not_measurable_because = match bound {
+        BoundKind::PerPixel => (!stage.measurable).then(|| {
+            format!(
+                "the spectral stage ({} engine), run on {} sample pixels at this noise, found the true points on {:.0} % of them (needs {:.0} %; no signal detected on {:.0} %): give more frames or spread τ wider",
+                stage.engine,
+                stage.pixels,
+                100.0 * stage.found_fraction,
+                100.0 * stage::STAGE_FRACTION,
+                100.0 * stage.no_signal_fraction
+            )
+        }),
+        BoundKind::SurfaceDomain => surface_domain_unmeasurable(&convergence, &stage),
+    };
+    let sample = sample_pixels(&view, 200, false);
     let ambiguity = ambiguity::ambiguity(station, frames, &design, (&view, &sample), spread, kappa);
     let stride = opts.bound_stride_px.unwrap_or_else(|| auto_stride(&view));
     let mut cov = bound_map(&design, &view, gain, &opts.radiometry, stride);
     let mut coords = view.screen_coords();
     let back_off = if opts.back_scale == 0.0 {
         Some("the back is AR-coated: one reflection".to_string())
-    } else if !separation.separable {
+    } else if bound == BoundKind::PerPixel && !separation.separable {
         Some(format!(
             "this schedule separates the two reflections on {:.0} % of the pixels (needs {:.0} %): add frames at larger τ or spread τ wider",
             100.0 * separation.separable_fraction,
@@ -361,15 +423,45 @@ pub fn predict(
         frames: frames.len(),
         patterns_shown: super::timing::switches(frames),
         seconds: opts.timing.seconds(frames),
-        bound: BoundKind::PerPixel,
+        bound,
+        separation_bins,
         front: surface(&sol.front_std_nm),
         back,
         back_not_measured_because: back_off,
         separation,
         ambiguity,
         stage,
+        convergence,
         not_measurable_because,
         bound_stride_px: stride,
+    })
+}
+
+/// Why the surface-domain fit will not measure a schedule: its start
+/// outside the basin the fit converges from, or the stage detecting no
+/// signal on more than a tenth of the sample pixels (the fit leaves out
+/// the pixels the stage found no fringes on); `None` when it will.
+pub fn surface_domain_unmeasurable(c: &Convergence, stage: &StageCheck) -> Option<String> {
+    if !c.converges {
+        let worst = c
+            .directions
+            .iter()
+            .map(|d| d.basin_px)
+            .fold(f64::INFINITY, f64::min);
+        return Some(format!(
+            "the reflections are too close to separate pixel by pixel, and the surface-domain fit started from the flat plate does not reach the truth from the prior's spread of {:.1} px (one reflection: from {worst:.1} px; both, noise-free: on {:.0} % of the sample pixels, needs {:.0} %): add frames at low τ, or start from a closer prior",
+            c.prior_spread_px,
+            100.0 * c.pixel_fraction,
+            100.0 * converge::PIXEL_FRACTION
+        ));
+    }
+    (stage.no_signal_fraction > 1.0 - stage::STAGE_FRACTION).then(|| {
+        format!(
+            "the spectral stage detected no fringes on {:.0} % of {} sample pixels at this noise (the surface-domain fit leaves those out; at most {:.0} %): give more frames",
+            100.0 * stage.no_signal_fraction,
+            stage.pixels,
+            100.0 * (1.0 - stage::STAGE_FRACTION)
+        )
     })
 }
 
@@ -384,6 +476,7 @@ impl Prediction {
             "patterns_shown": self.patterns_shown,
             "predicted": {
                 "bound": self.bound,
+                "separation_bins": self.separation_bins,
                 "front_rms_nm": self.front.rms_nm,
                 "back_rms_nm": self.back.as_ref().map(|b| b.rms_nm),
                 "front_std_nm": self.front.std_nm,
@@ -395,6 +488,7 @@ impl Prediction {
             "measurable": self.not_measurable_because.is_none(),
             "not_measurable_because": self.not_measurable_because,
             "stage": self.stage,
+            "convergence": self.convergence,
             "bound_stride_px": self.bound_stride_px,
         })
     }

@@ -30,6 +30,6 @@ pub mod pixel;
 pub mod run;
 
 pub use run::{
-    median_separation_bins, solve, Clipped, DirectError, DirectOptions, DirectSolution, Iteration,
-    ThirdReflection,
+    median_separation_bins, median_separation_bins_of, solve, Clipped, DirectError, DirectOptions,
+    DirectSolution, Iteration, ThirdReflection,
 };

@@ -560,7 +560,22 @@ fn fit(
 /// directions, over the schedule's τ span), from the flat plate the
 /// station describes; NaN where no pixel sees both.
 pub fn median_separation_bins(solver: &SpectralSolver) -> f64 {
-    let design = solver.design();
+    median_separation_bins_of(
+        solver.design(),
+        solver.prior(),
+        solver.candidates().iter().map(|&c| c as usize),
+    )
+}
+
+/// [`median_separation_bins`] of a schedule's `design` over the `pixels`
+/// of a traced `prior` (the planner's view of a schedule not yet
+/// acquired): one computation, so that `mfd plan` and `--estimator auto`
+/// decide alike.
+pub fn median_separation_bins_of(
+    design: &crate::solve::spectral::model::Design,
+    prior: &crate::optics::trace::TracedView,
+    pixels: impl Iterator<Item = usize>,
+) -> f64 {
     let (lo, hi) = design
         .frames
         .iter()
@@ -568,11 +583,9 @@ pub fn median_separation_bins(solver: &SpectralSolver) -> f64 {
             (l.min(f.tau), h.max(f.tau))
         });
     let span = hi - lo;
-    let mut seps: Vec<f64> = solver
-        .candidates()
-        .iter()
-        .filter_map(|&c| {
-            let p = &solver.prior().pixels[c as usize];
+    let mut seps: Vec<f64> = pixels
+        .filter_map(|c| {
+            let p = &prior.pixels[c];
             let (f, b) = (p.front.as_ref().ok()?, p.back.as_ref().ok()?);
             let along = |ax: &crate::solve::spectral::model::Axis| {
                 (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * span
