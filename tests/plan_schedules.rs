@@ -2,6 +2,8 @@
 //! of a schedule and the designed schedules, on the 48×48 bench station
 //! (the paper's geometry, 10 mm, n = 1.5).
 
+mod common;
+
 use mfd::acquire::acquisition::FrameInfo;
 use mfd::acquire::patterns::Schedule;
 use mfd::acquire::schedule_file;
@@ -166,11 +168,10 @@ struct Achieved {
 /// Renders `frames` on the simulated bench station (5 % noise), runs the
 /// spectral stage and the surface solver.
 fn run_pipeline(frames: &[FrameInfo], seed: u64, engine: mfd::solve::spectral::Engine) -> Achieved {
-    use mfd::acquire::patterns::Pattern;
     use mfd::optics::trace::{Plate, TracedView};
     use mfd::report::metrics::rms_difference_nm;
-    use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
-    use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
+    use mfd::sim::{RandomSurfaceSpec, SimParams};
+    use mfd::solve::spectral::SpectralConfig;
     use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
     let station = bench_station(10.0, 1.5, 15.0).unwrap();
     let e = &station.element;
@@ -187,22 +188,12 @@ fn run_pipeline(frames: &[FrameInfo], seed: u64, engine: mfd::solve::spectral::E
         seed,
         ..SimParams::default()
     };
-    let mut cam = Renderer::new(&view, &station.screen, params).unwrap();
     let config = SpectralConfig {
         engine,
         ..SpectralConfig::default()
     };
-    let mut solver = SpectralSolver::new(&station, frames, config).unwrap();
-    let mut buf = vec![0u16; station.camera.pixel_count()];
-    for (k, f) in frames.iter().enumerate() {
-        let p = Pattern {
-            direction_deg: f.direction_deg,
-            tau: f.tau,
-            phase_rad: f.phase_rad,
-        };
-        cam.render(&p, k as u64, &mut buf);
-        solver.push_frame(k, &buf).unwrap();
-    }
+    let patterns = common::patterns_of(frames);
+    let (mut solver, _) = common::spectral::fed_solver(&station, &view, params, &patterns, config);
     let mut maps = solver.solve().unwrap();
     // The quality pass `mfd reconstruct` makes.
     mfd::pipeline::consistency::check(

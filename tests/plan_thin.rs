@@ -7,8 +7,10 @@
 //! paper's schedule (τ 0.2…200 step 0.2, ±45°, 2000 frames) on the same
 //! noise seeds.
 
+mod common;
+
 use mfd::acquire::acquisition::FrameInfo;
-use mfd::acquire::patterns::{Pattern, Schedule};
+use mfd::acquire::patterns::Schedule;
 use mfd::budget::scene::{scene, Radiometry, SceneOptions};
 use mfd::optics::station::{bench_station, Station};
 use mfd::optics::trace::{Plate, TracedView};
@@ -16,8 +18,8 @@ use mfd::optics::zernike::ZernikeSurface;
 use mfd::pipeline::{self, Estimator, Input, Options};
 use mfd::plan::{self, BoundKind, Budget, DesignOptions, PlanOptions, Prediction};
 use mfd::report::metrics::rms_difference_nm;
-use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
-use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
+use mfd::sim::{RandomSurfaceSpec, SimParams};
+use mfd::solve::spectral::SpectralConfig;
 use mfd::solve::surfaces::report::figures;
 use mfd::solve::surfaces::SurfaceOptions;
 
@@ -68,18 +70,9 @@ fn achieved(
         seed,
         ..SimParams::default()
     };
-    let mut cam = Renderer::new(&view, &station.screen, params).unwrap();
-    let mut solver = SpectralSolver::new(station, frames, SpectralConfig::default()).unwrap();
-    let mut buf = vec![0u16; station.camera.pixel_count()];
-    for (k, f) in frames.iter().enumerate() {
-        let p = Pattern {
-            direction_deg: f.direction_deg,
-            tau: f.tau,
-            phase_rad: f.phase_rad,
-        };
-        cam.render(&p, k as u64, &mut buf);
-        solver.push_frame(k, &buf).unwrap();
-    }
+    let patterns = common::patterns_of(frames);
+    let (mut solver, _) =
+        common::spectral::fed_solver(station, &view, params, &patterns, SpectralConfig::default());
     let options = Options {
         surfaces: Some(SurfaceOptions {
             terms: Some(TERMS),

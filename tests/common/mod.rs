@@ -25,3 +25,18 @@ pub fn mfd(args: &[&str]) -> std::process::Output {
         .output()
         .unwrap()
 }
+
+/// The patterns that show `frames` (a schedule file's or a design's), in
+/// their order.
+pub fn patterns_of(
+    frames: &[mfd::acquire::acquisition::FrameInfo],
+) -> Vec<mfd::acquire::patterns::Pattern> {
+    frames
+        .iter()
+        .map(|f| mfd::acquire::patterns::Pattern {
+            direction_deg: f.direction_deg,
+            tau: f.tau,
+            phase_rad: f.phase_rad,
+        })
+        .collect()
+}
