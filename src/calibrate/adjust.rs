@@ -251,7 +251,9 @@ pub fn select(n: &DMatrix<f64>, params: &[Param]) -> (Vec<usize>, Selection) {
         match worst {
             Some((k, s, p)) if s > HOLD_RATIO * p => {
                 let i = active.remove(k);
-                log::info!(
+                // Debug, not info: the report's summary says what each step
+                // held and why, once; `select` runs more than once a step.
+                log::debug!(
                     "calibration: holding {} (σ {s:.3e} against prior {p:.3e})",
                     params[i].name()
                 );

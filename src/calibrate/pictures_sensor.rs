@@ -121,6 +121,11 @@ pub fn targets_on_sensor_png(
     Ok(())
 }
 
+/// The plotted rows run to this multiple of the sensor's height: the band
+/// below the sensor holds the legend (the planned targets reach the
+/// sensor's corners, `make::target_layout`).
+const LEGEND_BAND: f64 = 1.35;
+
 type Drawn<'a> = Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
 
 fn panel<'a>(
@@ -138,8 +143,9 @@ fn panel<'a>(
         .margin(12)
         .x_label_area_size(55)
         .y_label_area_size(60)
-        // Rows run down the sensor, as in its frames.
-        .build_cartesian_2d(0.0..w, h..0.0)?;
+        // Rows run down the sensor, as in its frames; a band below the
+        // sensor holds the legend, clear of the targets at its edges.
+        .build_cartesian_2d(0.0..w, LEGEND_BAND * h..0.0)?;
     chart
         .configure_mesh()
         .max_light_lines(0)
@@ -148,6 +154,13 @@ fn panel<'a>(
         .label_style((FAMILY, 14))
         .axis_desc_style((FAMILY, 15))
         .draw()?;
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(0.0, 0.0), (w, h)],
+            BLACK.mix(0.5).stroke_width(1),
+        )))?
+        .label("sensor")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 16, y + 5)], BLACK.mix(0.5)));
     chart
         .draw_series(layer.iter().map(|t| {
             PathElement::new(
