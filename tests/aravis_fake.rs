@@ -251,18 +251,6 @@ fn measure_shows_a_designed_schedule_over_the_fake_camera() {
     }
 }
 
-/// Runs `mfd` and returns its output, failing with what it printed.
-fn mfd_ok(args: &[&str]) -> String {
-    let run = common::mfd(args);
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
-    );
-    assert!(run.status.success(), "mfd {args:?}:\n{log}");
-    log
-}
-
 #[test]
 fn calibrate_capture_takes_target_frames_over_the_fake_camera() {
     // `mfd calibrate capture --camera aravis:fake`: the simulated target
@@ -274,7 +262,7 @@ fn calibrate_capture_takes_target_frames_over_the_fake_camera() {
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("session");
     let nominal = common::repo("calib/paper-sim.toml");
-    mfd_ok(&[
+    common::mfd_ok(&[
         "calibrate",
         "template",
         session.to_str().unwrap(),
@@ -306,7 +294,7 @@ fn calibrate_capture_takes_target_frames_over_the_fake_camera() {
     for (k, t) in planned.iter().enumerate() {
         let s = t.stage_mm;
         let stage = format!("{},{},{}", s.x, s.y, s.z);
-        let log = mfd_ok(&[
+        let log = common::mfd_ok(&[
             "calibrate",
             "capture",
             session.to_str().unwrap(),

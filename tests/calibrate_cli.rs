@@ -12,22 +12,11 @@ use std::path::Path;
 use mfd::optics::station::{Station, StationUncertainty};
 use mfd::sim::session::flat_truth;
 
-fn run(args: &[&str]) -> String {
-    let out = common::mfd(args);
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(out.status.success(), "mfd {args:?} failed:\n{text}");
-    text
-}
-
 fn simulated_session(dir: &Path) -> String {
     let s = dir.join("session");
     // Binned 4 × 4 (324 × 241 pixels, the paper's field of view): the
     // whole chain in seconds.
-    run(&[
+    common::mfd_ok(&[
         "calibrate",
         "simulate",
         "--out",
@@ -44,9 +33,9 @@ fn simulated_session(dir: &Path) -> String {
 fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
     let dir = tempfile::tempdir().unwrap();
     let session = simulated_session(dir.path());
-    assert!(run(&["calibrate", "check", &session]).contains("ready to solve"));
+    assert!(common::mfd_ok(&["calibrate", "check", &session]).contains("ready to solve"));
     let cal = dir.path().join("cal");
-    let printed = run(&[
+    let printed = common::mfd_ok(&[
         "calibrate",
         "solve",
         &session,
@@ -95,7 +84,7 @@ fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
     // A plate on the truth (5 % noise), reconstructed on the calibration.
     let acq = dir.path().join("plate");
     let truth_station = format!("{session}/truth/station.toml");
-    run(&[
+    common::mfd_ok(&[
         "simulate",
         "--station",
         &truth_station,
@@ -107,7 +96,7 @@ fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
         acq.to_str().unwrap(),
     ]);
     let rec = dir.path().join("rec");
-    let printed = run(&[
+    let printed = common::mfd_ok(&[
         "reconstruct",
         acq.to_str().unwrap(),
         "--station",
@@ -120,7 +109,7 @@ fn a_simulated_session_calibrates_and_measures_within_its_uncertainty() {
     assert!(printed.contains("= noise"), "{printed}");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(rec.join("summary.json")).unwrap()).unwrap();
-    let cmp = run(&[
+    let cmp = common::mfd_ok(&[
         "compare",
         "--surfaces",
         rec.join("surfaces.json").to_str().unwrap(),
@@ -160,7 +149,7 @@ fn a_reference_flat_with_two_reflections_is_refused_naming_the_entry() {
     let flat = Path::new(&session).join("flat");
     std::fs::remove_dir_all(&flat).unwrap();
     let truth_station = format!("{session}/truth/station.toml");
-    run(&[
+    common::mfd_ok(&[
         "simulate",
         "--station",
         &truth_station,

@@ -18,6 +18,19 @@ pub fn repo(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)
 }
 
+/// Runs the `mfd` binary with `args`, fails the test with what it printed
+/// unless it succeeds, and returns its standard output and error.
+pub fn mfd_ok(args: &[&str]) -> String {
+    let out = mfd(args);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "mfd {args:?} failed:\n{text}");
+    text
+}
+
 /// Runs the `mfd` binary with `args` and returns what it did.
 pub fn mfd(args: &[&str]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_mfd"))
