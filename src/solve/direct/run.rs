@@ -556,9 +556,17 @@ fn fit(
 }
 
 /// Median over the pixels that see both reflections of their predicted
-/// front–back separation in Fourier bins (the smallest over the
-/// directions, over the schedule's τ span), from the flat plate the
-/// station describes; NaN where no pixel sees both.
+/// front–back separation in Fourier bins, over the schedule's τ span, from
+/// the flat plate the station describes; NaN where no pixel sees both.
+///
+/// A pixel's separation is that of its best pair of non-parallel
+/// directions, the smaller of the two: the per-pixel fit is joint over the
+/// directions, and two that each see the reflections apart fix both
+/// points in the plane, while a direction along which they coincide adds
+/// only their blend. With the two diagonals alone it is the smaller of
+/// their two; with the plain directions too, a pixel whose reflections
+/// lie along a plain axis is separated by the other plain one and the
+/// diagonals.
 pub fn median_separation_bins(solver: &SpectralSolver) -> f64 {
     median_separation_bins_of(
         solver.design(),
@@ -590,7 +598,8 @@ pub fn median_separation_bins_of(
             let along = |ax: &crate::solve::spectral::model::Axis| {
                 (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * span
             };
-            design.axes.iter().map(along).reduce(f64::min)
+            let seps: Vec<f64> = design.axes.iter().map(along).collect();
+            design.pair_separation(&seps)
         })
         .collect();
     if seps.is_empty() {

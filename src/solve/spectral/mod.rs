@@ -135,7 +135,8 @@ pub struct PixelResult {
     pub tau_max: f64,
     /// RMS of the residuals, counts.
     pub residual_rms: f64,
-    /// Separation of the two reflections, smallest over the directions, in Fourier bins.
+    /// Separation of the two reflections in Fourier bins, that of the best
+    /// pair of directions (`model::Design::pair_separation`).
     pub separation_bins: f64,
     /// Number of reflections in the chosen model (0: none).
     pub model: u8,

@@ -74,6 +74,27 @@ pub struct Design {
 }
 
 impl Design {
+    /// A pixel's separation of its reflections given `seps`, that along
+    /// each axis: over the pairs of non-parallel axes, the largest of the
+    /// pair's smaller one (two directions that each see the reflections
+    /// apart fix both points in the plane; one along which they coincide
+    /// adds only their blend); with no such pair (one direction, or
+    /// parallel ones), the smallest. `None` without axes.
+    pub fn pair_separation(&self, seps: &[f64]) -> Option<f64> {
+        let mut best: Option<f64> = None;
+        for (i, p) in self.axes.iter().enumerate() {
+            for (j, q) in self.axes.iter().enumerate().skip(i + 1) {
+                // |sin| of the angle between the two fringe gradients.
+                let cross = (p.a * q.b - p.b * q.a).abs() / (p.a.hypot(p.b) * q.a.hypot(q.b));
+                if cross > 1e-6 {
+                    let m = seps[i].min(seps[j]);
+                    best = Some(best.map_or(m, |b| b.max(m)));
+                }
+            }
+        }
+        best.or_else(|| seps.iter().copied().reduce(f64::min))
+    }
+
     /// The screen point `(u, v)` whose fringe coordinate along each
     /// direction is `mus[d]`: least squares of `a_d u + b_d v = μ_d − c_d`
     /// over the directions; `None` when the directions do not span the plane.
@@ -406,4 +427,50 @@ pub fn linear_amplitudes_in(
         rss = (yy - h.dot(&sol)).max(0.0);
     }
     (out, rss)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::acquire::patterns::FringeAxis;
+
+    fn design(dirs: &[f64]) -> Design {
+        Design {
+            frames: Vec::new(),
+            axes: dirs
+                .iter()
+                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, 1600, 1200)))
+                .collect(),
+            directions_deg: dirs.to_vec(),
+        }
+    }
+
+    #[test]
+    fn pair_separation_takes_the_best_non_parallel_pair() {
+        // Reflections 10 px apart along v: 0° sees nothing, 90° all of it
+        // (10/1200 of s), each diagonal √½ of it (10·√½/1979.9).
+        let d = [0.0, 10.0];
+        let along = |x: &Design| -> Vec<f64> {
+            x.axes
+                .iter()
+                .map(|a| (a.a * d[0] + a.b * d[1]).abs())
+                .collect()
+        };
+        let diag = 10.0 * std::f64::consts::FRAC_1_SQRT_2 / 1979.898987322333;
+        let two = design(&[45.0, -45.0]);
+        let s = two.pair_separation(&along(&two)).unwrap();
+        assert!((s - diag).abs() < 1e-12, "{s} {diag}");
+        // With the plain ones: the pair (90°, a diagonal), the diagonal's.
+        let four = design(&[45.0, -45.0, 0.0, 90.0]);
+        let s = four.pair_separation(&along(&four)).unwrap();
+        assert!((s - diag).abs() < 1e-12, "{s} {diag}");
+        // 0° and 90° alone: the pair's smaller, 0.
+        let plain = design(&[0.0, 90.0]);
+        assert_eq!(plain.pair_separation(&along(&plain)), Some(0.0));
+        // Parallel directions have no pair: the smallest.
+        let par = design(&[90.0, 270.0]);
+        let s = par.pair_separation(&along(&par)).unwrap();
+        assert!((s - 10.0 / 1200.0).abs() < 1e-12, "{s}");
+        assert_eq!(design(&[]).pair_separation(&[]), None);
+    }
 }

@@ -197,15 +197,18 @@ pub(super) fn expected_separation_std<S: Samples + ?Sized>(
     })
 }
 
-/// Smallest separation over the directions, in Fourier bins, of two screen
-/// points `d` apart.
+/// Separation in Fourier bins of two screen points `d` apart, that of the
+/// best pair of directions
+/// ([`crate::solve::spectral::model::Design::pair_separation`]).
 fn separation_bins(ctx: &PixelContext, d: &[f64; 2]) -> f64 {
-    ctx.design
+    let seps: Vec<f64> = ctx
+        .design
         .axes
         .iter()
         .enumerate()
         .map(|(k, ax)| (ax.a * d[0] + ax.b * d[1]).abs() / ctx.plans.bin(k))
-        .fold(f64::INFINITY, f64::min)
+        .collect();
+    ctx.design.pair_separation(&seps).unwrap_or(f64::INFINITY)
 }
 
 /// Standard deviation of |S_i1 − S_i0| from the covariance.
