@@ -96,6 +96,11 @@ pub struct PlanArgs {
     /// Largest candidate τ of a design (default 2 τ_max).
     #[arg(long, value_parser = super::check::positive)]
     tau_hi: Option<f64>,
+    /// Fringe directions a design may use, degrees, comma-separated; the
+    /// design weighs each (`--directions` sets the schedule predicted
+    /// without a budget).
+    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "a fringe direction in degrees"), value_delimiter = ',', default_values_t = [45.0, -45.0, 0.0, 90.0], allow_hyphen_values = true)]
+    design_directions: Vec<f64>,
 }
 
 /// Runs `mfd plan`.
@@ -127,7 +132,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
         Some(b) => {
             let dopts = DesignOptions {
                 plan: opts,
-                directions_deg: args.flags.directions.clone(),
+                directions_deg: args.design_directions.clone(),
                 tau_hi: args.tau_hi,
                 ..DesignOptions::default()
             };

@@ -29,6 +29,18 @@
 //! where the pixel sits on the fringe, which averages over the pixels, and
 //! a repeat costs no settle time.
 //!
+//! **Directions.** The candidates span the four directions a display
+//! shows (±45°, 0°, 90°) and the design weighs them like τ. Where the two
+//! reflections lie apart along one screen axis (the plane of incidence),
+//! the diagonals each see √½ of their separation and the plain direction
+//! across it all of it; the other plain one sees them coincide and adds
+//! their blend. On the paper's station at 1000 frames the Fisher limit of
+//! the diagonals alone is ≈ 1.29× the paper's 2000-frame bound (front),
+//! with all four it is below the paper's 2000-frame bound (docs/figures.md,
+//! "Planned schedules"). The candidates are weighed with the physical
+//! falloff ([`falloff_stretch`]), so that the plain directions' gain is
+//! the geometry's, not the model's convention of a falloff in τ.
+//!
 //! **Constraints.** The optimum concentrates the frames near the τ of most
 //! information, which can leave the spectral stage's start on a wrong
 //! fringe or the reflections unseparated. The design used is the mixture
@@ -79,7 +91,8 @@ pub enum Budget {
 pub struct DesignOptions {
     /// The scene and timing.
     pub plan: PlanOptions,
-    /// Fringe directions, degrees.
+    /// Fringe directions the design may use, degrees (default: the
+    /// diagonals and the plain ones; the design weighs each).
     pub directions_deg: Vec<f64>,
     /// Grid step of the candidate τ values.
     pub tau_step: f64,
@@ -95,7 +108,7 @@ impl Default for DesignOptions {
     fn default() -> Self {
         DesignOptions {
             plan: PlanOptions::default(),
-            directions_deg: vec![45.0, -45.0],
+            directions_deg: vec![45.0, -45.0, 0.0, 90.0],
             tau_step: 0.5,
             tau_hi: None,
             pixels: 48,
@@ -173,15 +186,31 @@ fn problem(station: &Station, opts: &DesignOptions) -> Result<(Problem, Design),
     let sigma = r.sigma_counts();
     let mut pixels = Vec::new();
     let mut grads = Vec::new();
+    let stretch = falloff_stretch((station.screen.width, station.screen.height), &design);
+    let kappa = r.tau_max.powi(-2);
     for q in sample_pixels(&view, opts.pixels, false) {
         let p = super::stage::truth_params(&view.pixels[q], gain, r);
         let k = p.k;
         // The model's gradient row has ∂/∂A = 1 first, so a one-frame JᵀJ's
-        // first column is the row itself.
+        // first column is the row itself. Every other entry carries the
+        // falloff e(τ) once, κ's also τ²: on a direction of stretch ℓ the
+        // physical falloff e(ℓτ) = e(τ)·exp(−κ(ℓ²−1)τ²) scales them.
         let g: Vec<Vec<f64>> = (0..candidates.len() as u32)
             .map(|c| {
                 let m = normal_equations(&design, &[c], &[0.0], &p).jtj;
-                (0..p.len()).map(|a| m[(a, 0)] / sigma).collect()
+                let f = &design.frames[c as usize];
+                let l2 = stretch[f.dir].powi(2);
+                let damp = (-kappa * (l2 - 1.0) * f.tau * f.tau).exp();
+                (0..p.len())
+                    .map(|a| {
+                        let x = m[(a, 0)] / sigma;
+                        match a {
+                            0 => x,
+                            a if a + 1 == p.len() => x * damp * l2,
+                            _ => x * damp,
+                        }
+                    })
+                    .collect()
             })
             .collect();
         let uv: Vec<usize> = (0..k)
@@ -198,6 +227,30 @@ fn problem(station: &Station, opts: &DesignOptions) -> Result<(Problem, Design),
         },
         design,
     ))
+}
+
+/// Per direction of `design`, the factor ℓ ≥ 1 by which its fringes are
+/// finer on the screen than the diagonals' at equal τ: `L₄₅ / L_d`, the
+/// spec's screen length along the direction (1 for ±45°; 1.24 for 0° and
+/// 1.65 for 90° on a 1600 × 1200 screen).
+///
+/// The model (and `mfd simulate`, and the fixtures' forward model) puts
+/// the modulation falloff on τ alone, `e(τ) = exp(−(τ/τ_max)²)`, the
+/// same on every direction. The blur that makes it is the camera's and
+/// the screen's, a property of the fringe's period in screen pixels: on
+/// an instrument its falloff on a direction of shorter `L` is
+/// `e(ℓτ)`, τ_max being the diagonals' (the paper's schedules). The design
+/// weighs its candidates with that physical falloff, the smaller of the
+/// two, so a schedule that uses the plain directions is not drawn to
+/// high τ on them by the model's convention alone; the prediction, which
+/// is checked against the model's renderings, keeps the model's.
+fn falloff_stretch((width, height): (u32, u32), design: &Design) -> Vec<f64> {
+    let diagonal = (f64::from(width) + f64::from(height)) / std::f64::consts::SQRT_2;
+    design
+        .axes
+        .iter()
+        .map(|ax| (diagonal * ax.a.hypot(ax.b)).max(1.0))
+        .collect()
 }
 
 impl Problem {
@@ -368,8 +421,8 @@ fn admissible(
             "design candidate of {} frames: surface-domain basin {:?} px against the prior's {:.1} px, pixels {:.2}, no signal on {:.2}: {why:?}",
             frames.len(),
             c.directions.iter().map(|d| d.basin_px).collect::<Vec<_>>(),
-            c.pixel_fraction,
             views.spread_px,
+            c.pixel_fraction,
             stage.no_signal_fraction,
         );
         return Ok(why.is_none());
@@ -601,6 +654,27 @@ pub fn design(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_plain_directions_are_finer_by_the_screens_lengths() {
+        use crate::acquire::patterns::FringeAxis;
+        use crate::solve::spectral::model::Axis;
+        let dirs = [45.0, -45.0, 0.0, 90.0];
+        let design = Design {
+            frames: Vec::new(),
+            axes: dirs
+                .iter()
+                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, 1600, 1200)))
+                .collect(),
+            directions_deg: dirs.to_vec(),
+        };
+        // L₄₅ = 2800/√2 = 1979.9 px; L₀ = 1600, L₉₀ = 1200 (spec).
+        let l45 = 2800.0 / std::f64::consts::SQRT_2;
+        let want = [1.0, 1.0, l45 / 1600.0, l45 / 1200.0];
+        for (got, want) in falloff_stretch((1600, 1200), &design).iter().zip(want) {
+            assert!((got - want).abs() < 1e-12, "{got} {want}");
+        }
+    }
 
     #[test]
     fn cumulative_rounding_keeps_the_count_and_the_shares() {

@@ -419,13 +419,25 @@ pub fn predict(
         rms_nm: std.iter().skip(3).map(|s| s * s).sum::<f64>().sqrt(),
     };
     let back = (sol.back_fitted && back_off.is_none()).then(|| surface(&sol.back_std_nm));
+    let front = surface(&sol.front_std_nm);
+    // `mfd reconstruct` withholds a surface whose expected error is at
+    // least its fitted RMS (`pipeline::withheld`): a bound at the expected
+    // departure or above resolves nothing.
+    let not_measurable_because = not_measurable_because.or_else(|| {
+        (front.rms_nm >= opts.surface_nm).then(|| {
+            format!(
+                "the predicted front error, {:.0} nm RMS, is at least the expected departure of the surface ({:.0} nm RMS, --surface-nm): the reconstruction would be withheld; give more frames or spread τ wider",
+                front.rms_nm, opts.surface_nm
+            )
+        })
+    });
     Ok(Prediction {
         frames: frames.len(),
         patterns_shown: super::timing::switches(frames),
         seconds: opts.timing.seconds(frames),
         bound,
         separation_bins,
-        front: surface(&sol.front_std_nm),
+        front,
         back,
         back_not_measured_because: back_off,
         separation,
