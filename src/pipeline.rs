@@ -38,7 +38,8 @@ mod station_uncertainty;
 
 pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
 pub use estimator::{
-    surface_domain_preferred, withheld, DirectReport, Estimator, DIRECT_BELOW_BINS,
+    surface_domain_preferred, surfaces_from_frames, withheld, DirectReport, Estimator,
+    DIRECT_BELOW_BINS,
 };
 pub use result_dir::{InputFile, Inputs, Staged};
 

@@ -17,13 +17,14 @@ use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
+use mfd::pipeline::{surfaces_from_frames, Estimator};
 use mfd::report::metrics::rms_difference_nm;
 use mfd::report::plot::{line_plot_png, Panel, Series};
 use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
 use mfd::solve::surfaces::lm::LmOptions;
 use mfd::solve::surfaces::report::figures;
-use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};
+use mfd::solve::surfaces::SurfaceOptions;
 
 /// Arguments of `mfd tradeoff`.
 #[derive(Args)]
@@ -106,11 +107,16 @@ pub fn run(args: &TradeoffArgs) -> anyhow::Result<()> {
         let acquisition_s = popts.timing.seconds(&frames);
         for &it in &args.max_iter {
             let t = Instant::now();
-            let maps = spectral(&station, &view, n, it, args)?;
+            let solved = spectral(&station, &view, n, it, args)?;
             let spectral_s = t.elapsed().as_secs_f64();
             for &terms in &args.terms {
-                let mut row =
-                    surfaces(&station, &maps, (&front, &back), (n, terms, it), spectral_s);
+                let mut row = surfaces(
+                    &station,
+                    &solved,
+                    (&front, &back),
+                    (n, terms, it),
+                    spectral_s,
+                );
                 row.acquisition_s = acquisition_s;
                 let p = mfd::plan::predict(
                     &station,
@@ -168,10 +174,10 @@ fn designed_rows(
         let mut per_seed = Vec::new();
         for &seed in &seeds {
             let t = Instant::now();
-            let maps = solve_frames(station, view, &d.frames, it, args.noise, seed + n as u64)?;
+            let solved = solve_frames(station, view, &d.frames, it, args.noise, seed + n as u64)?;
             let row = surfaces(
                 station,
-                &maps,
+                &solved,
                 truth,
                 (n, terms, it),
                 t.elapsed().as_secs_f64(),
@@ -272,7 +278,7 @@ fn solve_frames(
     it: usize,
     noise: f64,
     seed: u64,
-) -> anyhow::Result<SpectralMaps> {
+) -> anyhow::Result<Solved> {
     let params = SimParams {
         noise_frac: noise,
         seed,
@@ -297,10 +303,17 @@ fn solve_frames(
     checked(solver, station)
 }
 
+/// A spectral stage that has run: the solver (its schedule and prior,
+/// which the surface-domain fit needs) and its maps.
+struct Solved {
+    solver: SpectralSolver,
+    maps: SpectralMaps,
+}
+
 /// The solver's maps with the quality pass `mfd reconstruct` makes
 /// (fits far above the noise, points far from the station's prediction:
 /// set to NaN), so that the achieved error is the pipeline's.
-fn checked(mut solver: SpectralSolver, station: &Station) -> anyhow::Result<SpectralMaps> {
+fn checked(mut solver: SpectralSolver, station: &Station) -> anyhow::Result<Solved> {
     let mut maps = solver.solve()?;
     let c = mfd::pipeline::consistency::check(
         &mut maps,
@@ -310,7 +323,7 @@ fn checked(mut solver: SpectralSolver, station: &Station) -> anyhow::Result<Spec
         mfd::pipeline::Limits::default(),
     );
     log::debug!("tradeoff: {}", c.note);
-    Ok(maps)
+    Ok(Solved { solver, maps })
 }
 
 /// The uniform family: τ from 0.5 in steps of 0.5 to 0.5 n, n frames per direction.
@@ -330,7 +343,7 @@ fn spectral(
     n: usize,
     it: usize,
     args: &TradeoffArgs,
-) -> anyhow::Result<SpectralMaps> {
+) -> anyhow::Result<Solved> {
     let patterns = uniform(n).patterns();
     let params = SimParams {
         noise_frac: args.noise,
@@ -351,14 +364,18 @@ fn spectral(
     checked(solver, station)
 }
 
+/// The surfaces of a solved stage, by `mfd reconstruct`'s default
+/// estimator (`auto`: the surface-domain fit where the reflections are
+/// closer than its rule, or where the per-pixel route measures nothing),
+/// against the truth.
 fn surfaces(
     station: &Station,
-    maps: &SpectralMaps,
+    solved: &Solved,
     truth: (&ZernikeSurface, &ZernikeSurface),
     (frames, terms, max_iter): (usize, usize, usize),
     spectral_s: f64,
 ) -> Row {
-    let (coords, cov) = (maps.screen_coords(), maps.screen_cov());
+    let maps = &solved.maps;
     let total = |k: usize| maps.pixels.iter().filter(|p| p.s[k][0].is_finite()).count() as f64;
     let mut row = Row {
         frames,
@@ -384,11 +401,22 @@ fn surfaces(
         ..SurfaceOptions::default()
     };
     let t = Instant::now();
-    let result = Observations::from_maps(station, &coords, Uncertainty::Cov(&cov))
-        .and_then(|obs| reconstruct(&obs, station, &opts));
+    let result = surfaces_from_frames(&solved.solver, maps, station, &opts, Estimator::Auto);
     row.surfaces_s = t.elapsed().as_secs_f64();
     match result {
-        Ok(sol) => {
+        Ok((_, sol, direct)) => {
+            if direct.is_some() {
+                row.note = "surface-domain fit".into();
+            }
+            // What `mfd reconstruct` would withhold is not counted as
+            // measured (`pipeline::withheld`'s rules): both surfaces where
+            // the surface-domain fit did not converge, a surface whose
+            // expected error is at least its fitted RMS.
+            let unconverged = direct.as_ref().is_some_and(|d| !d.converged);
+            let withheld = [false, true].map(|back| {
+                let f = figures(&sol, back);
+                unconverged || (f.error_rms_nm > 0.0 && f.error_rms_nm >= f.rms_nm)
+            });
             row.error_nm = [
                 rms_difference_nm(sol.front.coefficients_nm(), truth.0.coefficients_nm()),
                 rms_difference_nm(sol.back.coefficients_nm(), truth.1.coefficients_nm()),
@@ -403,17 +431,39 @@ fn surfaces(
                 .filter_map(|s| s.lm.as_ref())
                 .any(|l| !l.converged)
             {
-                row.note = "iteration limit".into();
+                row.note = join_note(&row.note, "iteration limit");
+            }
+            for (k, name) in ["front", "back"].iter().enumerate() {
+                if withheld[k] {
+                    row.error_nm[k] = f64::NAN;
+                    row.reported_nm[k] = f64::NAN;
+                    row.note = join_note(
+                        &row.note,
+                        &format!("{name} withheld as `mfd reconstruct` would"),
+                    );
+                }
             }
             if !sol.back_fitted {
                 row.error_nm[1] = f64::NAN;
                 row.reported_nm[1] = f64::NAN;
-                row.note = "no back reflection resolved: back not reconstructed".into();
+                row.note = join_note(
+                    &row.note,
+                    "no back reflection resolved: back not reconstructed",
+                );
             }
         }
         Err(e) => row.note = format!("stopped: {e}"),
     }
     row
+}
+
+/// `a` and `b` as one note.
+fn join_note(a: &str, b: &str) -> String {
+    if a.is_empty() {
+        b.to_string()
+    } else {
+        format!("{a}; {b}")
+    }
 }
 
 fn write_outputs(rows: &[Row], args: &TradeoffArgs) -> anyhow::Result<()> {

@@ -85,7 +85,7 @@ pub struct DirectReport {
 /// # Errors
 /// The per-pixel route's [`SurfaceError`] where it is the estimator (or
 /// the fallback) and fails; the surface-domain fit's where it is asked for.
-pub(super) fn surfaces_from_frames(
+pub fn surfaces_from_frames(
     solver: &SpectralSolver,
     maps: &SpectralMaps,
     station: &Station,
