@@ -193,8 +193,10 @@ fn stanzas(planned: &[PlannedTarget], first: usize, in_stage: bool) -> String {
             "in the nominal world frame (stage = world until the session has flat points: pass --session)"
         }
     );
+    // A reading that rounds to zero is written as 0.000, not −0.000.
+    let mm = |x: f64| if (x * 1000.0).round() == 0.0 { 0.0 } else { x };
     for (k, t) in planned.iter().enumerate() {
-        let s = t.stage_mm;
+        let s = t.stage_mm.map(mm);
         out.push_str(&format!(
             "\n[[target_point]]  # px ({:.0}, {:.0}), world z {:.1} mm\nstage_mm = [{:.3}, {:.3}, {:.3}]\nimage = \"targets/{:03}.png\"\n",
             t.expected_px.x,
