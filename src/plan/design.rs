@@ -657,17 +657,7 @@ mod tests {
 
     #[test]
     fn the_plain_directions_are_finer_by_the_screens_lengths() {
-        use crate::acquire::patterns::FringeAxis;
-        use crate::solve::spectral::model::Axis;
-        let dirs = [45.0, -45.0, 0.0, 90.0];
-        let design = Design {
-            frames: Vec::new(),
-            axes: dirs
-                .iter()
-                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, 1600, 1200)))
-                .collect(),
-            directions_deg: dirs.to_vec(),
-        };
+        let design = Design::of_directions(&[45.0, -45.0, 0.0, 90.0], 1600, 1200);
         // L₄₅ = 2800/√2 = 1979.9 px; L₀ = 1600, L₉₀ = 1200 (spec).
         let l45 = 2800.0 / std::f64::consts::SQRT_2;
         let want = [1.0, 1.0, l45 / 1600.0, l45 / 1200.0];

@@ -430,19 +430,28 @@ pub fn linear_amplitudes_in(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::acquire::patterns::FringeAxis;
-
-    fn design(dirs: &[f64]) -> Design {
+impl Design {
+    /// The axes of `dirs` on a `width × height` screen, no frames: what
+    /// tests of direction geometry need.
+    pub(crate) fn of_directions(dirs: &[f64], width: u32, height: u32) -> Design {
+        use crate::acquire::patterns::FringeAxis;
         Design {
             frames: Vec::new(),
             axes: dirs
                 .iter()
-                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, 1600, 1200)))
+                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, width, height)))
                 .collect(),
             directions_deg: dirs.to_vec(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn design(dirs: &[f64]) -> Design {
+        Design::of_directions(dirs, 1600, 1200)
     }
 
     #[test]
