@@ -133,6 +133,70 @@ fn frames_are_cosines_at_the_traced_points() {
 }
 
 #[test]
+fn the_screen_period_falloff_is_the_diagonals_on_a_finer_fringe() {
+    // Noise-free, the difference of a pattern and its π-shifted twin is
+    // 2 a e cos(…): its ratio between the two falloffs is e(ℓτ)/e(τ),
+    // ℓ = L₄₅/L_d from the spec's screen lengths, at every pixel.
+    use mfd::acquire::patterns::Pattern;
+    use mfd::sim::Falloff;
+    let station = fixture_station();
+    let (plate, _) = random_plate(&station, 3);
+    let view = TracedView::trace(&station, &plate);
+    let (w, h) = (station.screen.width, station.screen.height);
+    let l45 = FringeAxis::new(45.0, w, h).length_px;
+    let n = station.camera.pixel_count();
+    let diff = |falloff: Falloff, direction_deg: f64, tau: f64| -> Vec<f64> {
+        let params = SimParams {
+            falloff,
+            ..SimParams::default()
+        };
+        let mut cam = Renderer::new(&view, &station.screen, params).unwrap();
+        let (mut a, mut b) = (vec![0u16; n], vec![0u16; n]);
+        let p = |phase_rad| Pattern {
+            direction_deg,
+            tau,
+            phase_rad,
+        };
+        cam.render(&p(0.0), 0, &mut a);
+        cam.render(&p(std::f64::consts::PI), 1, &mut b);
+        a.iter()
+            .zip(&b)
+            .map(|(&x, &y)| f64::from(x) - f64::from(y))
+            .collect()
+    };
+    let tau = 100.0;
+    for direction_deg in [45.0, -45.0, 0.0, 90.0] {
+        let l = l45 / FringeAxis::new(direction_deg, w, h).length_px;
+        let want = (-((l * tau / 150.0).powi(2) - (tau / 150.0).powi(2))).exp();
+        let (t, sp) = (
+            diff(Falloff::Tau, direction_deg, tau),
+            diff(Falloff::ScreenPeriod, direction_deg, tau),
+        );
+        let mut used = 0;
+        for (x, y) in t.iter().zip(&sp) {
+            // Counts are rounded: ±1 on each of two frames, so ±2 on a
+            // difference of at least 2000 is 1e-3 of it; the ratio's
+            // error is then at most 2e-3 (both differences rounded).
+            if x.abs() >= 2000.0 {
+                used += 1;
+                assert!(
+                    (y / x - want).abs() <= 2e-3 + 2.0 * want / x.abs(),
+                    "{direction_deg}°: {y} / {x} against {want}"
+                );
+            }
+        }
+        assert!(used > 100, "{direction_deg}°: {used} pixels compared");
+        if direction_deg.abs() == 45.0 {
+            assert_eq!(want, 1.0);
+        } else {
+            // A plain direction's L is shorter than the diagonals' on any
+            // screen: the effect is there, well beyond the 2e-3 above.
+            assert!(want < 0.95, "{direction_deg}°: {want}");
+        }
+    }
+}
+
+#[test]
 fn rendering_is_seeded_and_order_independent() {
     let station = fixture_station();
     let (plate, _) = random_plate(&station, 3);

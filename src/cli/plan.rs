@@ -98,8 +98,10 @@ pub struct PlanArgs {
     tau_hi: Option<f64>,
     /// Fringe directions a design may use, degrees, comma-separated; the
     /// design weighs each (`--directions` sets the schedule predicted
-    /// without a budget).
-    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "a fringe direction in degrees"), value_delimiter = ',', default_values_t = [45.0, -45.0, 0.0, 90.0], allow_hyphen_values = true)]
+    /// without a budget). 0 and 90 help where the reflections are close,
+    /// but only where the falloff is the same on every direction at equal
+    /// τ (docs/figures.md, "Planned schedules").
+    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "a fringe direction in degrees"), value_delimiter = ',', default_values_t = [45.0, -45.0], allow_hyphen_values = true)]
     design_directions: Vec<f64>,
 }
 

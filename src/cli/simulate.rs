@@ -46,6 +46,11 @@ pub struct SimulateArgs {
     /// Modulation falloff τ_max of exp(−(τ/τ_max)²) (paper Eq. 5).
     #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
     tau_max: f64,
+    /// What the falloff acts on: tau (every direction alike, the model's
+    /// convention) or screen-period (a plain direction's finer fringes
+    /// fall off sooner; τ_max is the diagonals').
+    #[arg(long, value_enum, default_value_t = mfd::sim::Falloff::Tau)]
+    falloff: mfd::sim::Falloff,
     /// Ambient light, in units of full-white screen radiance.
     #[arg(long, value_parser = super::check::fraction, default_value_t = 0.01)]
     ambient: f64,
@@ -100,6 +105,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         third_reflection: args.third_reflection,
         path_scale: [1.0, args.back_scale, args.back_scale],
         seed: args.seed,
+        falloff: args.falloff,
     };
     let layout = match (args.png, args.bit_depth) {
         (true, 8) => FrameLayout::Png { bit_depth: 8 },
@@ -140,6 +146,10 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         layout,
         overwrite: args.overwrite,
     };
+    anyhow::ensure!(
+        args.display_gamma.is_none() || args.falloff == mfd::sim::Falloff::Tau,
+        "--falloff screen-period: the phase-shifting renderer (--display-gamma) has its own falloff; give one or the other"
+    );
     let report = match args.display_gamma {
         Some(gamma) => {
             let phase = PhaseShiftParams {

@@ -30,7 +30,7 @@ use std::time::Instant;
 pub use camera::{SimFaults, SimulatedCamera};
 pub use gige_feed::{Filled, GigeFeed};
 pub use phase::{phase_shift_patterns, Luminance, PhaseShiftParams, PhaseShiftRenderer};
-pub use render::{Renderer, SimParams};
+pub use render::{Falloff, Renderer, SimParams};
 pub use scene::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
 pub use target::{render_spot, SpotCamera, SpotScene};

@@ -46,6 +46,21 @@ pub struct SimParams {
     pub path_scale: [f64; 3],
     /// Seed of the noise.
     pub seed: u64,
+    /// What the falloff acts on.
+    pub falloff: Falloff,
+}
+
+/// What the modulation falloff acts on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Falloff {
+    /// `e(τ)` on every direction (paper Eq. 7; the model's and the
+    /// fixtures' forward model's convention).
+    #[default]
+    Tau,
+    /// The fringe's period on the screen: `e(ℓτ)` with `ℓ = L₄₅ / L_d`
+    /// (1 on the diagonals, whose τ_max it is; a plain direction's fringes
+    /// are finer at equal τ), as a blur of the screen or the camera acts.
+    ScreenPeriod,
 }
 
 impl Default for SimParams {
@@ -60,6 +75,7 @@ impl Default for SimParams {
             third_reflection: false,
             path_scale: [1.0; 3],
             seed: 1,
+            falloff: Falloff::Tau,
         }
     }
 }
@@ -241,7 +257,16 @@ impl Renderer {
 
     /// Fills `modulation` for `pattern`; returns the falloff `e(τ)`.
     fn modulate(&mut self, pattern: &Pattern) -> f64 {
-        let e = (-(pattern.tau / self.params.tau_max).powi(2)).exp();
+        let stretch = match self.params.falloff {
+            Falloff::Tau => 1.0,
+            Falloff::ScreenPeriod => {
+                let (w, h) = (f64::from(self.screen_w), f64::from(self.screen_h));
+                let diagonal = (w + h) / std::f64::consts::SQRT_2;
+                diagonal
+                    / FringeAxis::new(pattern.direction_deg, self.screen_w, self.screen_h).length_px
+            }
+        };
+        let e = (-(stretch * pattern.tau / self.params.tau_max).powi(2)).exp();
         let phase_cycles = pattern.phase_rad / std::f64::consts::TAU;
         let tau = pattern.tau;
         self.direction(pattern.direction_deg);
