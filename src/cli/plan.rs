@@ -290,24 +290,22 @@ fn print_summary(p: &Prediction) {
         100.0 * a.start_found_fraction
     );
     let st = &p.stage;
-    if p.bound == plan::BoundKind::SurfaceDomain {
-        // The surface-domain fit takes the pixels with fringes; the stage's
-        // own points are only its start.
-        println!(
-            "spectral stage ({} engine) on {} sample pixels at this noise: fringes detected on {:.0} % (the surface-domain fit's pixels), true points found per pixel on {:.0} %",
-            st.engine,
-            st.pixels,
-            100.0 * (1.0 - st.no_signal_fraction),
-            100.0 * st.found_fraction
-        );
+    // Where the surface-domain fit makes the surfaces it takes the pixels
+    // with fringes; the stage's own points are only its start.
+    let detected = if p.bound == plan::BoundKind::SurfaceDomain {
+        format!(
+            "fringes detected on {:.0} % (the surface-domain fit's pixels), true points found per pixel",
+            100.0 * (1.0 - st.no_signal_fraction)
+        )
     } else {
-        println!(
-            "spectral stage ({} engine) on {} sample pixels at this noise: true points found on {:.0} %",
-            st.engine,
-            st.pixels,
-            100.0 * st.found_fraction
-        );
-    }
+        "true points found".to_string()
+    };
+    println!(
+        "spectral stage ({} engine) on {} sample pixels at this noise: {detected} on {:.0} %",
+        st.engine,
+        st.pixels,
+        100.0 * st.found_fraction
+    );
     if p.bound == mfd::plan::BoundKind::SurfaceDomain {
         let c = &p.convergence;
         for d in &c.directions {
