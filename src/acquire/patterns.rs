@@ -84,6 +84,14 @@ impl FringeAxis {
         (u * self.cos + v * self.sin - self.s0) * self.inv_l
     }
 
+    /// How much finer this direction's fringes are on the screen than the
+    /// diagonals' at equal τ, `L₄₅ / L` (1 on ±45°; 1.24 at 0° and 1.65 at
+    /// 90° on a 1600 × 1200 screen): the factor on τ of a falloff that
+    /// acts on the fringe's period in screen pixels.
+    pub fn stretch_from_diagonal(&self, width: u32, height: u32) -> f64 {
+        FringeAxis::new(45.0, width, height).length_px / self.length_px
+    }
+
     /// The largest τ this screen can show in this direction: the display's
     /// Nyquist limit. Pixel centres sample the fringe; one period spans
     /// `L / τ` screen pixels along the fringe direction (`s` runs over

@@ -68,6 +68,7 @@
 //! its prediction fourfold.
 
 use crate::acquire::acquisition::FrameInfo;
+use crate::acquire::patterns::FringeAxis;
 use crate::budget::scene;
 use crate::optics::station::Station;
 use crate::solve::spectral::model::{normal_equations, Design};
@@ -252,11 +253,14 @@ fn problem(station: &Station, opts: &DesignOptions) -> Result<(Problem, Design),
 /// high τ on them by the model's convention alone; the prediction, which
 /// is checked against the model's renderings, keeps the model's.
 fn falloff_stretch((width, height): (u32, u32), design: &Design) -> Vec<f64> {
-    let diagonal = (f64::from(width) + f64::from(height)) / std::f64::consts::SQRT_2;
     design
-        .axes
+        .directions_deg
         .iter()
-        .map(|ax| (diagonal * ax.a.hypot(ax.b)).max(1.0))
+        .map(|&d| {
+            FringeAxis::new(d, width, height)
+                .stretch_from_diagonal(width, height)
+                .max(1.0)
+        })
         .collect()
 }
 

@@ -260,10 +260,8 @@ impl Renderer {
         let stretch = match self.params.falloff {
             Falloff::Tau => 1.0,
             Falloff::ScreenPeriod => {
-                let (w, h) = (f64::from(self.screen_w), f64::from(self.screen_h));
-                let diagonal = (w + h) / std::f64::consts::SQRT_2;
-                diagonal
-                    / FringeAxis::new(pattern.direction_deg, self.screen_w, self.screen_h).length_px
+                FringeAxis::new(pattern.direction_deg, self.screen_w, self.screen_h)
+                    .stretch_from_diagonal(self.screen_w, self.screen_h)
             }
         };
         let e = (-(stretch * pattern.tau / self.params.tau_max).powi(2)).exp();
