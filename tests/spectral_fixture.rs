@@ -113,7 +113,7 @@ fn our_bound_against_the_fixture_bound() {
             offset: gain * (amb + 0.5 * (f.weight + b.weight)),
             amp: [0.5 * gain * f.weight, 0.5 * gain * b.weight, 0.0],
             uv: [[f.u, f.v], [b.u, b.v], [0.0, 0.0]],
-            kappa: 150f64.powi(-2),
+            kappa: design.uniform_falloff(150f64.powi(-2)),
         };
         let ne = normal_equations(&design, &index, &y, &params);
         let cov = ne.jtj.try_inverse().unwrap() * sigma * sigma;

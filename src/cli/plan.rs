@@ -98,10 +98,11 @@ pub struct PlanArgs {
     tau_hi: Option<f64>,
     /// Fringe directions a design may use, degrees, comma-separated; the
     /// design weighs each (`--directions` sets the schedule predicted
-    /// without a budget). 0 and 90 help where the reflections are close,
-    /// but only where the falloff is the same on every direction at equal
-    /// τ (docs/figures.md, "Planned schedules").
-    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "a fringe direction in degrees"), value_delimiter = ',', default_values_t = [45.0, -45.0], allow_hyphen_values = true)]
+    /// without a budget). 0 and 90 see the reflections' separation along
+    /// the screen's axes where the diagonals see √½ of it; the model fits
+    /// a falloff per fringe length, so they hold whether a blur acts on τ
+    /// or on the screen period (docs/figures.md, "Planned schedules").
+    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "a fringe direction in degrees"), value_delimiter = ',', default_values_t = [45.0, -45.0, 0.0, 90.0], allow_hyphen_values = true)]
     design_directions: Vec<f64>,
 }
 

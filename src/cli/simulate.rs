@@ -46,9 +46,10 @@ pub struct SimulateArgs {
     /// Modulation falloff τ_max of exp(−(τ/τ_max)²) (paper Eq. 5).
     #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
     tau_max: f64,
-    /// What the falloff acts on: tau (every direction alike, the model's
-    /// convention) or screen-period (a plain direction's finer fringes
-    /// fall off sooner; τ_max is the diagonals').
+    /// What the falloff acts on: tau (every direction alike, the fixtures'
+    /// forward model) or screen-period (a plain direction's finer fringes
+    /// fall off sooner, as a blur acts; τ_max is the diagonals'). The
+    /// model fits a falloff per fringe length and takes either.
     #[arg(long, value_enum, default_value_t = mfd::sim::Falloff::Tau)]
     falloff: mfd::sim::Falloff,
     /// Ambient light, in units of full-white screen radiance.

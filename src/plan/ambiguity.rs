@@ -156,6 +156,8 @@ pub fn start_found_fraction(
     kappa: f64,
 ) -> f64 {
     let plans = SpectrumPlans::new(design);
+    // A blur on the screen period: each falloff group's physical κ.
+    let falloff = design.physical_falloff(kappa);
     let mut found = 0usize;
     let mut y = vec![0.0; design.frames.len()];
     for &q in pixels {
@@ -166,7 +168,7 @@ pub fn start_found_fraction(
             .collect();
         for (f, yf) in design.frames.iter().zip(y.iter_mut()) {
             let ax = design.axes[f.dir];
-            let e = (-kappa * f.tau * f.tau).exp();
+            let e = (-design.kappa_of(f, &falloff) * f.tau * f.tau).exp();
             *yf = 1.0
                 + hits
                     .iter()
@@ -218,8 +220,11 @@ pub fn ambiguity(
                 .filter(|f| f.direction_deg == d)
                 .map(|f| f.tau)
                 .collect();
-            let axis = FringeAxis::new(d, station.screen.width, station.screen.height);
-            let (lobe, range) = direction_ambiguity(&taus, kappa, &axis);
+            let (w, h) = (station.screen.width, station.screen.height);
+            let axis = FringeAxis::new(d, w, h);
+            // The physical falloff of this direction's fringe length.
+            let l = axis.stretch_from_diagonal(w, h);
+            let (lobe, range) = direction_ambiguity(&taus, kappa * l * l, &axis);
             DirectionAmbiguity {
                 direction_deg: d,
                 main_lobe_px: lobe,

@@ -50,7 +50,7 @@ use crate::optics::station::Station;
 use crate::optics::trace::{PixelPaths, TracedView};
 use crate::solve::direct::pixel::{linearise, moved, start};
 use crate::solve::direct::DirectOptions;
-use crate::solve::spectral::model::{Design, Samples, SeriesSamples, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{Design, Samples, SeriesSamples, MAX_PARAMS};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 
 /// Grid of starts scanned per direction, between 0 and twice the prior's
@@ -158,12 +158,12 @@ fn pixel_converges(
     opts: &DirectOptions,
     tol_px: f64,
 ) -> Option<bool> {
-    let t = super::stage::truth_params(truth, gain, radiometry);
-    let s = super::stage::truth_params(prior, gain, radiometry);
+    let t = super::stage::truth_params(design, truth, gain, radiometry);
+    let s = super::stage::truth_params(design, prior, gain, radiometry);
     if t.k != s.k || t.k == 0 {
         return None;
     }
-    let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
+    let mut row = [0.0; MAX_PARAMS];
     let y: Vec<f64> = design
         .frames
         .iter()
@@ -313,7 +313,11 @@ pub fn convergence(
                 .filter(|f| f.direction_deg == dir)
                 .map(|f| f.tau)
                 .collect();
-            let axis = FringeAxis::new(dir, station.screen.width, station.screen.height);
+            let (w, h) = (station.screen.width, station.screen.height);
+            let axis = FringeAxis::new(dir, w, h);
+            // The physical falloff of this direction's fringe length.
+            let l = axis.stretch_from_diagonal(w, h);
+            let kappa = kappa * l * l;
             let limit = 2.0 * prior_spread_px / axis.length_px;
             tol_px = tol_px.min(0.01 * axis.length_px / tau_w(&taus, kappa));
             DirectionBasin {

@@ -30,22 +30,20 @@
 //! a repeat costs no settle time.
 //!
 //! **Directions.** The candidates may span the plain directions (0°,
-//! 90°) beside the diagonals (`--design-directions`); by default they do
-//! not. Where the two reflections lie apart along one screen axis (the
-//! plane of incidence) the diagonals each see √½ of their separation and
-//! the plain direction across it all of it: on the paper's station at 1000
-//! frames the four-direction design reaches 1.11× the paper's 2000-frame
-//! bound where the diagonals' Fisher limit is ≈ 1.29× (docs/figures.md,
-//! "Planned schedules"). But the model shares one falloff κ over the
-//! directions, right where it acts on τ (this renderer, the fixtures'
-//! forward model) and wrong where it acts on the fringe's period on the
-//! screen, as a blur does: rendered that way (`mfd simulate --falloff
-//! screen-period`) the same design's surfaces came out 355 nm off with
-//! 1.97 nm reported. The diagonals share one screen length, so for them
-//! the two agree. Until the model fits a falloff per direction, the plain
-//! ones are opt-in and warned about. Candidates are weighed with the
-//! physical falloff ([`falloff_stretch`]) so that the geometry, not the
-//! model's convention, decides their share.
+//! 90°) beside the diagonals (`--design-directions`). Where the two
+//! reflections lie apart along one screen axis (the plane of incidence)
+//! the diagonals each see √½ of their separation and the plain direction
+//! across it all of it, so the plain directions pay where the reflections
+//! are close (docs/figures.md, "Planned schedules"). Their fringes run a
+//! shorter length L across the screen, and a blur (the camera's, the
+//! screen's) acts on the fringe's period in screen pixels, L/τ: at equal
+//! τ they fall off sooner. The model fits one falloff κ per fringe length
+//! ([`Design::falloff_group`]), so it holds whether a scene's falloff
+//! acts on τ (this renderer's default, the fixtures' forward model) or on
+//! the screen period (`mfd simulate --falloff screen-period`); the
+//! candidates are weighed, and the prediction made, with the physical one
+//! ([`Design::physical_falloff`]), the smaller modulation of the two, so
+//! that the geometry, not a renderer's convention, decides their share.
 //!
 //! **Constraints.** The optimum concentrates the frames near the τ of most
 //! information, which can leave the spectral stage's start on a wrong
@@ -68,7 +66,6 @@
 //! its prediction fourfold.
 
 use crate::acquire::acquisition::FrameInfo;
-use crate::acquire::patterns::FringeAxis;
 use crate::budget::scene;
 use crate::optics::station::Station;
 use crate::solve::spectral::model::{normal_equations, Design};
@@ -99,8 +96,7 @@ pub struct DesignOptions {
     /// The scene and timing.
     pub plan: PlanOptions,
     /// Fringe directions the design may use, degrees; the design weighs
-    /// each. Default: the diagonals alone (see the module's
-    /// "Directions": the plain ones are not safe on an instrument).
+    /// each. Default: ±45°, 0° and 90° (the module's "Directions").
     pub directions_deg: Vec<f64>,
     /// Grid step of the candidate τ values.
     pub tau_step: f64,
@@ -116,7 +112,7 @@ impl Default for DesignOptions {
     fn default() -> Self {
         DesignOptions {
             plan: PlanOptions::default(),
-            directions_deg: vec![45.0, -45.0],
+            directions_deg: vec![45.0, -45.0, 0.0, 90.0],
             tau_step: 0.5,
             tau_hi: None,
             pixels: 48,
@@ -194,31 +190,18 @@ fn problem(station: &Station, opts: &DesignOptions) -> Result<(Problem, Design),
     let sigma = r.sigma_counts();
     let mut pixels = Vec::new();
     let mut grads = Vec::new();
-    let stretch = falloff_stretch((station.screen.width, station.screen.height), &design);
-    let kappa = r.tau_max.powi(-2);
     for q in sample_pixels(&view, opts.pixels, false) {
-        let p = super::stage::truth_params(&view.pixels[q], gain, r);
+        // The truth with the physical falloff (a blur on the screen
+        // period, [`Design::physical_falloff`]); the fit's κ per falloff
+        // group is among the parameters, as in reconstruction.
+        let p = super::stage::truth_params(&design, &view.pixels[q], gain, r);
         let k = p.k;
         // The model's gradient row has ∂/∂A = 1 first, so a one-frame JᵀJ's
-        // first column is the row itself. Every other entry carries the
-        // falloff e(τ) once, κ's also τ²: on a direction of stretch ℓ the
-        // physical falloff e(ℓτ) = e(τ)·exp(−κ(ℓ²−1)τ²) scales them.
+        // first column is the row itself.
         let g: Vec<Vec<f64>> = (0..candidates.len() as u32)
             .map(|c| {
                 let m = normal_equations(&design, &[c], &[0.0], &p).jtj;
-                let f = &design.frames[c as usize];
-                let l2 = stretch[f.dir].powi(2);
-                let damp = (-kappa * (l2 - 1.0) * f.tau * f.tau).exp();
-                (0..p.len())
-                    .map(|a| {
-                        let x = m[(a, 0)] / sigma;
-                        match a {
-                            0 => x,
-                            a if a + 1 == p.len() => x * damp * l2,
-                            _ => x * damp,
-                        }
-                    })
-                    .collect()
+                (0..p.len()).map(|a| m[(a, 0)] / sigma).collect()
             })
             .collect();
         let uv: Vec<usize> = (0..k)
@@ -235,33 +218,6 @@ fn problem(station: &Station, opts: &DesignOptions) -> Result<(Problem, Design),
         },
         design,
     ))
-}
-
-/// Per direction of `design`, the factor ℓ ≥ 1 by which its fringes are
-/// finer on the screen than the diagonals' at equal τ: `L₄₅ / L_d`, the
-/// spec's screen length along the direction (1 for ±45°; 1.24 for 0° and
-/// 1.65 for 90° on a 1600 × 1200 screen).
-///
-/// The model (and `mfd simulate`, and the fixtures' forward model) puts
-/// the modulation falloff on τ alone, `e(τ) = exp(−(τ/τ_max)²)`, the
-/// same on every direction. The blur that makes it is the camera's and
-/// the screen's, a property of the fringe's period in screen pixels: on
-/// an instrument its falloff on a direction of shorter `L` is
-/// `e(ℓτ)`, τ_max being the diagonals' (the paper's schedules). The design
-/// weighs its candidates with that physical falloff, the smaller of the
-/// two, so a schedule that uses the plain directions is not drawn to
-/// high τ on them by the model's convention alone; the prediction, which
-/// is checked against the model's renderings, keeps the model's.
-fn falloff_stretch((width, height): (u32, u32), design: &Design) -> Vec<f64> {
-    design
-        .directions_deg
-        .iter()
-        .map(|&d| {
-            FringeAxis::new(d, width, height)
-                .stretch_from_diagonal(width, height)
-                .max(1.0)
-        })
-        .collect()
 }
 
 impl Problem {
@@ -578,16 +534,6 @@ pub fn design(
             "two non-parallel directions are needed",
         ));
     }
-    if opts
-        .directions_deg
-        .iter()
-        .any(|d| (d.rem_euclid(90.0) - 45.0).abs() > 1e-9)
-    {
-        log::warn!(
-            "designing over directions other than the diagonals ({:?}°): the model fits one falloff for all directions, which holds only where the falloff acts on τ alike on every direction; where it acts on the fringe's period on the screen (a blur), a plain direction's finer fringes fall off sooner and the points are biased far beyond their σ (docs/figures.md, \"Planned schedules\")",
-            opts.directions_deg
-        );
-    }
     let (prob, _) = problem(station, opts)?;
     let opt = prob.optimum(opts.iterations)?;
     let flat = traced_view(station, opts.plan.back_scale)?;
@@ -675,17 +621,6 @@ pub fn design(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_plain_directions_are_finer_by_the_screens_lengths() {
-        let design = Design::of_directions(&[45.0, -45.0, 0.0, 90.0], 1600, 1200);
-        // L₄₅ = 2800/√2 = 1979.9 px; L₀ = 1600, L₉₀ = 1200 (spec).
-        let l45 = 2800.0 / std::f64::consts::SQRT_2;
-        let want = [1.0, 1.0, l45 / 1600.0, l45 / 1200.0];
-        for (got, want) in falloff_stretch((1600, 1200), &design).iter().zip(want) {
-            assert!((got - want).abs() < 1e-12, "{got} {want}");
-        }
-    }
 
     #[test]
     fn cumulative_rounding_keeps_the_count_and_the_shares() {

@@ -23,7 +23,7 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::Serialize;
 
 use crate::optics::trace::{PixelPaths, TracedView};
-use crate::solve::spectral::model::{Design, Params, SeriesSamples, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{Design, Params, SeriesSamples, MAX_PARAMS, MAX_REFLECTIONS};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 use crate::solve::spectral::pixel::{fit_samples_seeded, PixelContext, PixelFits};
 use crate::solve::spectral::statistics::{Statistics, STATS_BLOCK};
@@ -62,8 +62,11 @@ pub struct StageCheck {
 
 /// The spectral model's parameters of a pixel whose paths are `truth`
 /// (the reflections with a weight), at the camera gain `gain` and the
-/// radiometry `r`: the simulator's intensities as the fits see them.
+/// radiometry `r`, with `design`'s falloff groups at the physical falloff
+/// ([`Design::physical_falloff`], τ_max the diagonals'): the simulator's
+/// intensities as the fits see them.
 pub(super) fn truth_params(
+    design: &Design,
     truth: &PixelPaths,
     gain: f64,
     r: &crate::budget::scene::Radiometry,
@@ -77,7 +80,7 @@ pub(super) fn truth_params(
         offset: gain * (r.ambient + 0.5 * hits.iter().map(|h| h.weight).sum::<f64>()),
         amp: [0.0; MAX_REFLECTIONS],
         uv: [[0.0; 2]; MAX_REFLECTIONS],
-        kappa: r.tau_max.powi(-2),
+        kappa: design.physical_falloff(r.tau_max.powi(-2)),
     };
     for (j, h) in hits.iter().enumerate() {
         p.amp[j] = 0.5 * gain * h.weight;
@@ -169,10 +172,10 @@ fn series(
     rng: &mut rand_xoshiro::Xoshiro256PlusPlus,
 ) -> Vec<u16> {
     let r = &opts.radiometry;
-    let p = truth_params(truth, gain, r);
+    let p = truth_params(design, truth, gain, r);
     let full = f64::from((1u32 << r.bit_depth.min(16)) - 1);
     let sigma = r.sigma_counts();
-    let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
+    let mut row = [0.0; MAX_PARAMS];
     design
         .frames
         .iter()
@@ -267,7 +270,7 @@ pub fn stage_check(
             plans: &plans,
             prior: &prior.pixels[q],
             borrowed_offset: None,
-            kappa0,
+            kappa0: design.uniform_falloff(kappa0),
             allow_third: false,
             max_iter: config.max_iter,
         };
@@ -291,7 +294,7 @@ pub fn stage_check(
                 })
                 .collect();
             let excluded = y.iter().filter(|v| v.is_nan()).count();
-            let data = SeriesSamples::new(design, &plans, &y, kappa0);
+            let data = SeriesSamples::new(design, &plans, &y, design.uniform_falloff(kappa0));
             fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
         }
         ok += usize::from(found(&fits, &truth.pixels[q], two));

@@ -53,8 +53,9 @@ pub struct SimParams {
 /// What the modulation falloff acts on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Falloff {
-    /// `e(τ)` on every direction (paper Eq. 7; the model's and the
-    /// fixtures' forward model's convention).
+    /// `e(τ)` on every direction (paper Eq. 7; the fixtures' forward
+    /// model's convention; the model fits a κ per fringe length, so it
+    /// takes this and [`Falloff::ScreenPeriod`] alike).
     #[default]
     Tau,
     /// The fringe's period on the screen: `e(ℓτ)` with `ℓ = L₄₅ / L_d`

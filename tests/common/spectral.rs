@@ -81,7 +81,14 @@ pub fn run_patterns(
                 offset: g * (params.ambient + 0.5 * (wf + wb)),
                 amp: [0.5 * g * wf, 0.5 * g * wb, 0.0],
                 uv: [[f.u, f.v], [b.u, b.v], [0.0; 2]],
-                kappa: params.tau_max.powi(-2),
+                kappa: match params.falloff {
+                    mfd::sim::Falloff::Tau => {
+                        solver.design().uniform_falloff(params.tau_max.powi(-2))
+                    }
+                    mfd::sim::Falloff::ScreenPeriod => {
+                        solver.design().physical_falloff(params.tau_max.powi(-2))
+                    }
+                },
             };
             let cov = normal_equations(solver.design(), &index, &zeros, &p)
                 .jtj

@@ -24,7 +24,12 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::solve::spectral::model::{Normal, Params, Samples, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{
+    Falloff, Normal, Params, Samples, MAX_GROUPS, MAX_REFLECTIONS,
+};
+
+/// Largest number of nuisance parameters: A, B_1 … B_K, κ_1 … κ_G.
+const MAX_NUISANCE: usize = 1 + MAX_REFLECTIONS + MAX_GROUPS;
 
 /// A pixel's linearisation at its current parameters.
 #[derive(Debug, Clone, Copy)]
@@ -37,9 +42,9 @@ pub struct Linear {
     /// Its covariance `σ² H̃⁻¹`, px² (the 2×2 block alone with one reflection).
     pub cov: [[f64; 4]; 4],
     /// `H_nn⁻¹ g_n`: the nuisance step at unchanged screen points.
-    pub nuisance_step: [f64; 4],
+    pub nuisance_step: [f64; MAX_NUISANCE],
     /// `H_nn⁻¹ H_ns`: how the nuisance step moves with the screen points.
-    pub nuisance_coupling: [[f64; 4]; 4],
+    pub nuisance_coupling: [[f64; 4]; MAX_NUISANCE],
     /// RSS at the linearisation point, counts².
     pub rss: f64,
     /// Samples used.
@@ -53,11 +58,11 @@ pub struct Linear {
     pub chi2: f64,
 }
 
-/// Indices of the nuisance (A, B_k, κ) and screen-point parameters of a
-/// K-reflection model (see [`Params`] for the order).
-fn split(k: usize) -> (Vec<usize>, Vec<usize>) {
+/// Indices of the nuisance (A, B_k, κ_g) and screen-point parameters of a
+/// K-reflection model with G falloff groups (see [`Params`] for the order).
+fn split(k: usize, groups: usize) -> (Vec<usize>, Vec<usize>) {
     let mut nuisance: Vec<usize> = (0..=k).collect();
-    nuisance.push(1 + 3 * k);
+    nuisance.extend((0..groups).map(|g| 1 + 3 * k + g));
     let screen = (1 + k..1 + 3 * k).collect();
     (nuisance, screen)
 }
@@ -85,13 +90,12 @@ fn with_third(p: &Params, tie: &Tie) -> Params {
 }
 
 /// The tied model's normal equations in the two-reflection parameters of
-/// `p` (A, B1, B2, u1, v1, u2, v2, κ): the three-reflection ones at
+/// `p` (A, B1, B2, u1, v1, u2, v2, κ_1 … κ_G): the three-reflection ones at
 /// [`with_third`] reduced by `J₂ = J₃ T`, where T maps B2 onto B2 and
 /// `ratio`·B3 and holds S3 (its columns drop out).
 fn tied_normal(samples: &dyn Samples, p: &Params, tie: &Tie) -> Normal {
     let full = samples.normal(&with_third(p, tie));
-    // Full layout (K = 3): A 0, B 1–3, (u, v) 4–9, κ 10.
-    let t = tie_map(tie.ratio);
+    let t = tie_map(tie.ratio, p.kappa.groups);
     Normal {
         rss: full.rss,
         jtj: t.transpose() * &full.jtj * &t,
@@ -99,20 +103,16 @@ fn tied_normal(samples: &dyn Samples, p: &Params, tie: &Tie) -> Normal {
     }
 }
 
-/// T of [`tied_normal`]: 11 × 8.
-fn tie_map(ratio: f64) -> DMatrix<f64> {
-    let mut t = DMatrix::zeros(11, 8);
-    for (full, red) in [
-        (0, 0),
-        (1, 1),
-        (2, 2),
-        (4, 3),
-        (5, 4),
-        (6, 5),
-        (7, 6),
-        (10, 7),
-    ] {
+/// T of [`tied_normal`] with G falloff groups: (10 + G) × (7 + G). Full
+/// layout (K = 3): A 0, B 1–3, (u, v) 4–9, κ from 10; reduced (K = 2):
+/// A 0, B 1–2, (u, v) 3–6, κ from 7.
+fn tie_map(ratio: f64, groups: usize) -> DMatrix<f64> {
+    let mut t = DMatrix::zeros(10 + groups, 7 + groups);
+    for (full, red) in [(0, 0), (1, 1), (2, 2), (4, 3), (5, 4), (6, 5), (7, 6)] {
         t[(full, red)] = 1.0;
+    }
+    for g in 0..groups {
+        t[(10 + g, 7 + g)] = 1.0;
     }
     t[(3, 2)] = ratio;
     t
@@ -130,20 +130,22 @@ fn tie_map(ratio: f64) -> DMatrix<f64> {
 /// between pixels is not counted).
 pub fn third_score(samples: &dyn Samples, p: &Params, tie: &Tie, rho: f64) -> Option<[f64; 2]> {
     let full = samples.normal(&with_third(p, tie));
-    let t = tie_map(tie.ratio);
+    let groups = p.kappa.groups;
+    let (nf, nr) = (10 + groups, 7 + groups);
+    let t = tie_map(tie.ratio, groups);
     // γ's column: ∂μ/∂γ = ρ B2 · (B3's column).
-    let mut t_ext = DMatrix::zeros(11, 9);
-    t_ext.columns_mut(0, 8).copy_from(&t);
-    t_ext[(3, 8)] = rho * p.amp[1];
+    let mut t_ext = DMatrix::zeros(nf, nr + 1);
+    t_ext.columns_mut(0, nr).copy_from(&t);
+    t_ext[(3, nr)] = rho * p.amp[1];
     let jtj = t_ext.transpose() * &full.jtj * &t_ext;
     let jtr = t_ext.transpose() * &full.jtr;
-    let h_tt = jtj.view((0, 0), (8, 8)).clone_owned();
-    let h_tg = jtj.view((0, 8), (8, 1)).clone_owned();
+    let h_tt = jtj.view((0, 0), (nr, nr)).clone_owned();
+    let h_tg = jtj.view((0, nr), (nr, 1)).clone_owned();
     let chol = h_tt.cholesky()?;
     let a = chol.solve(&h_tg);
-    let g_t = jtr.rows(0, 8).clone_owned();
-    let info = jtj[(8, 8)] - (h_tg.transpose() * &a)[(0, 0)];
-    let score = jtr[8] - (a.transpose() * &g_t)[(0, 0)];
+    let g_t = jtr.rows(0, nr).clone_owned();
+    let info = jtj[(nr, nr)] - (h_tg.transpose() * &a)[(0, 0)];
+    let score = jtr[nr] - (a.transpose() * &g_t)[(0, 0)];
     let dof = samples.count().checked_sub(p.len()).filter(|&d| d > 0)? as f64;
     let sigma2 = full.rss / dof;
     (info > 0.0 && sigma2 > 0.0 && score.is_finite()).then_some([score / sigma2, info / sigma2])
@@ -165,7 +167,7 @@ pub fn linearise_tied(samples: &dyn Samples, p: &Params, tie: Option<&Tie>) -> O
     };
     let n = samples.count();
     let dof = n.checked_sub(p.len()).filter(|&d| d > 0)? as f64;
-    let (ni, si) = split(k);
+    let (ni, si) = split(k, p.kappa.groups);
     let pick = |rows: &[usize], cols: &[usize]| {
         DMatrix::from_fn(rows.len(), cols.len(), |a, b| {
             normal.jtj[(rows[a], cols[b])]
@@ -208,8 +210,8 @@ pub fn linearise_tied(samples: &dyn Samples, p: &Params, tie: Option<&Tie>) -> O
             *v = sigma2 * inv[(a, b)];
         }
     }
-    let mut nuisance_step = [0.0; 4];
-    let mut nuisance_coupling = [[0.0; 4]; 4];
+    let mut nuisance_step = [0.0; MAX_NUISANCE];
+    let mut nuisance_coupling = [[0.0; 4]; MAX_NUISANCE];
     for a in 0..ni.len() {
         nuisance_step[a] = step_n[a];
         for b in 0..si.len() {
@@ -234,7 +236,7 @@ pub fn linearise_tied(samples: &dyn Samples, p: &Params, tie: Option<&Tie>) -> O
 /// `n + H_nn⁻¹ g_n − H_nn⁻¹ H_ns (s − s0)`.
 pub fn moved(p: &Params, lin: &Linear, s: &[f64; 4]) -> Params {
     let k = p.k;
-    let (ni, _) = split(k);
+    let (ni, _) = split(k, p.kappa.groups);
     let mut ds = [0.0; 4];
     for (i, d) in ds.iter_mut().enumerate().take(2 * k) {
         *d = s[i] - lin.s0[i];
@@ -248,7 +250,7 @@ pub fn moved(p: &Params, lin: &Linear, s: &[f64; 4]) -> Params {
         match idx {
             0 => out.offset += step,
             i if i <= k => out.amp[i - 1] += step,
-            _ => out.kappa += step,
+            i => out.kappa[i - (1 + 3 * k)] += step,
         }
     }
     for j in 0..k {
@@ -259,7 +261,7 @@ pub fn moved(p: &Params, lin: &Linear, s: &[f64; 4]) -> Params {
 
 /// A pixel's starting parameters: its `k` screen points at `s`, κ0, and the
 /// background and amplitudes by linear least squares there.
-pub fn start(samples: &dyn Samples, k: usize, s: &[f64; 4], kappa0: f64) -> Params {
+pub fn start(samples: &dyn Samples, k: usize, s: &[f64; 4], kappa0: Falloff) -> Params {
     let mut uv = [[0.0; 2]; MAX_REFLECTIONS];
     for (j, point) in uv.iter_mut().enumerate().take(k) {
         *point = [s[2 * j], s[2 * j + 1]];
@@ -281,7 +283,9 @@ mod tests {
     use crate::solve::spectral::periodogram::SpectrumPlans;
 
     /// Two directions, τ 0.5…100: a design small enough for a unit test.
-    fn design() -> Design {
+    /// ±45°-like axes; the second's fringe length differs from the first's
+    /// unless `stretch2` is 1 (then one falloff group, else two).
+    fn design(stretch2: f64) -> Design {
         let mut frames = Vec::new();
         for dir in 0..2 {
             for i in 1..=200 {
@@ -297,18 +301,16 @@ mod tests {
                 a: 1.0 / 1000.0,
                 b: 1.0 / 1000.0,
                 c: 0.0,
+                stretch: 1.0,
             },
             Axis {
                 a: 1.0 / 1000.0,
                 b: -1.0 / 1000.0,
                 c: 0.0,
+                stretch: stretch2,
             },
         ];
-        Design {
-            frames,
-            axes,
-            directions_deg: vec![45.0, -45.0],
-        }
+        Design::new(frames, axes, vec![45.0, -45.0])
     }
 
     /// Noise-free samples of `truth`: the pseudo-observation from a start
@@ -316,19 +318,32 @@ mod tests {
     /// in the offset, and the moved nuisance on the truth's.
     #[test]
     fn pseudo_observation_of_exact_data_is_the_truth() {
-        let d = design();
+        exact_data_reaches_the_truth(1.0);
+    }
+
+    /// The same with two falloff groups whose κ differ by 1.65² (0° and 90°
+    /// beside the diagonals on the paper's screen): each group's κ is
+    /// profiled out on its own and recovered.
+    #[test]
+    fn pseudo_observation_with_two_falloff_groups_is_the_truth() {
+        exact_data_reaches_the_truth(1.65);
+    }
+
+    fn exact_data_reaches_the_truth(stretch2: f64) {
+        let d = design(stretch2);
+        assert_eq!(d.falloff_groups(), if stretch2 == 1.0 { 1 } else { 2 });
         let truth = Params {
             k: 2,
             offset: 500.0,
             amp: [300.0, 120.0, 0.0],
             uv: [[400.0, 300.0], [403.0, 301.5], [0.0; 2]],
-            kappa: 1.0 / 150.0f64.powi(2),
+            kappa: d.physical_falloff(1.0 / 150.0f64.powi(2)),
         };
         let y: Vec<f64> = d
             .frames
             .iter()
             .map(|f| {
-                let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
+                let mut row = [0.0; crate::solve::spectral::model::MAX_PARAMS];
                 crate::solve::spectral::model::eval_row(&d, f, &truth, &mut row)
             })
             .collect();
@@ -341,7 +356,7 @@ mod tests {
         // reach the truth, its fixed point, to rounding.
         let want = [400.0, 300.0, 403.0, 301.5];
         let mut s = [400.2, 299.9, 402.8, 301.7];
-        let mut p = start(&samples, 2, &s, truth.kappa * 1.2);
+        let mut p = start(&samples, 2, &s, d.uniform_falloff(1.2 * truth.kappa[0]));
         let err = |s: &[f64; 4]| {
             s.iter()
                 .zip(want)
@@ -367,6 +382,9 @@ mod tests {
         assert!(last < 1e-9, "{s:?}");
         assert!((p.amp[0] - 300.0).abs() < 1e-4, "{:?}", p.amp);
         assert!((p.amp[1] - 120.0).abs() < 1e-4, "{:?}", p.amp);
-        assert!((p.kappa / truth.kappa - 1.0).abs() < 1e-6, "{}", p.kappa);
+        for g in 0..d.falloff_groups() {
+            let r = p.kappa[g] / truth.kappa[g] - 1.0;
+            assert!(r.abs() < 1e-6, "{:?} {:?}", p.kappa, truth.kappa);
+        }
     }
 }

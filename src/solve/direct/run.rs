@@ -644,7 +644,10 @@ fn initial_pixels(
     plate: &Plate,
     two: bool,
 ) -> Vec<Pix> {
-    let kappa0 = median_kappa(maps).unwrap_or_else(|| solver.kappa_start());
+    let kappa0 = median_kappa(maps).map_or_else(
+        || solver.kappa_start(),
+        |k| solver.design().uniform_falloff(k),
+    );
     let cam = &station.camera;
     let w = cam.width as usize;
     let skip = PixelFlags::NO_DATA | PixelFlags::NO_SIGNAL;

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::model::{Design, SeriesSamples};
+use super::model::{Design, Falloff, SeriesSamples};
 use super::periodogram::SpectrumPlans;
 use super::pixel::{fit_samples_seeded, PixelContext, PixelFits, Seed};
 use super::prior::GeometryPrior;
@@ -17,8 +17,8 @@ use crate::optics::trace::TracedView;
 pub(super) struct FitSettings {
     /// Samples at or above this count (and at 0) are excluded.
     pub(super) saturation: Option<u16>,
-    /// Starting κ = 1/τ_max².
-    pub(super) kappa0: f64,
+    /// Starting κ = 1/τ_max², per falloff group.
+    pub(super) kappa0: Falloff,
     /// Whether a third reflection may be modelled.
     pub(super) allow_third: bool,
     /// Levenberg–Marquardt iteration cap.
@@ -106,8 +106,8 @@ impl<'a> FitBatch<'a> {
         self.settings.saturation
     }
 
-    /// Starting κ = 1/τ_max².
-    pub fn kappa0(&self) -> f64 {
+    /// Starting κ = 1/τ_max², per falloff group.
+    pub fn kappa0(&self) -> Falloff {
         self.settings.kappa0
     }
 

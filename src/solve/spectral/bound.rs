@@ -5,9 +5,11 @@ use super::model::{normal_equations, Design, Params, MAX_REFLECTIONS};
 
 /// Standard deviations `sqrt(σ_u² + σ_v²)` of S1 and S2 that no unbiased
 /// estimator can beat, for two reflections at `uv` with background `offset`
-/// and amplitudes `amp` (counts), falloff κ, and white noise of `sigma`
-/// counts on every frame of `design`: the inverse Fisher information
-/// `σ² (JᵀJ)⁻¹` of all 3K + 2 parameters. `None` if it is singular.
+/// and amplitudes `amp` (counts), falloff κ on the diagonals (a blur on the
+/// screen period: [`Design::physical_falloff`] for the other fringe
+/// lengths), and white noise of `sigma` counts on every frame of `design`:
+/// the inverse Fisher information `σ² (JᵀJ)⁻¹` of all 3K + 1 + G
+/// parameters, each falloff group's κ among them. `None` if it is singular.
 pub fn two_reflection_bound(
     design: &Design,
     uv: [[f64; 2]; 2],
@@ -53,7 +55,7 @@ fn reflections_cov(
         offset,
         amp: [0.0; MAX_REFLECTIONS],
         uv: [[0.0; 2]; MAX_REFLECTIONS],
-        kappa,
+        kappa: design.physical_falloff(kappa),
     };
     p.amp[..k].copy_from_slice(amp);
     p.uv[..k].copy_from_slice(uv);
@@ -77,8 +79,9 @@ fn reflections_cov(
 /// The bound at the truth for every pixel of a traced view, in the layout of
 /// `screen_cov.npy` (`[rows, columns, 4, 4]`, covariance of u1, v1, u2, v2,
 /// px², NaN where a reflection is absent): amplitudes `½·gain·weight`,
-/// background `gain·(ambient + ½ Σ weights)`, falloff `kappa = 1/τ_max²`,
-/// white noise `sigma` counts per frame.
+/// background `gain·(ambient + ½ Σ weights)`, falloff `kappa = 1/τ_max²` on
+/// the diagonals ([`Design::physical_falloff`] on other directions), white
+/// noise `sigma` counts per frame.
 pub fn truth_cov_map(
     design: &Design,
     view: &crate::optics::trace::TracedView,

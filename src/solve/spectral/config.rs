@@ -158,4 +158,9 @@ impl SpectralConfig {
             .unwrap_or_else(|| design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
             .powi(-2)
     }
+
+    /// [`SpectralConfig::kappa_start`] in every falloff group of `design`.
+    pub(super) fn falloff_start(&self, design: &Design) -> super::model::Falloff {
+        design.uniform_falloff(self.kappa_start(design))
+    }
 }

@@ -4,9 +4,21 @@
 //!
 //! Sample i, shown with direction d_i, τ_i and phase φ_i, is modelled as
 //! `y_i = A + e_i Σ_k B_k cos(2π (τ_i s_{d_i}(u_k, v_k)) + φ_i)`,
-//! `e_i = exp(−κ τ_i²)` (κ = 1/τ_max²), `s_d(u, v) = a_d u + b_d v + c_d` the
-//! spec's fringe coordinate. Parameters, in this order:
-//! `[A, B_1 … B_K, u_1, v_1, … u_K, v_K, κ]`.
+//! `e_i = exp(−κ_{g(d_i)} τ_i²)` (κ = 1/τ_max²), `s_d(u, v) = a_d u + b_d v + c_d`
+//! the spec's fringe coordinate. Parameters, in this order:
+//! `[A, B_1 … B_K, u_1, v_1, … u_K, v_K, κ_1 … κ_G]`.
+//!
+//! The falloff has one κ per *falloff group* g: the directions whose fringe
+//! runs the same length L across the screen (±45° share one; 0° and 90°
+//! each have their own on a screen that is not square). A blur acts on the
+//! fringe's period in screen pixels, L/τ, so directions of equal L fall off
+//! alike whatever the blur, and directions of different L do not: one κ
+//! for all of them is wrong by the factor (L₄₅/L)² in the exponent, which
+//! on the paper's station moves the points by hundreds of nm (the plain
+//! directions' falloff then pulls the fit). A κ per length instead holds
+//! under any convention a renderer uses (falloff on τ or on the screen
+//! period), at the cost of one parameter per extra length. A schedule on
+//! ±45° alone has one group, the paper's model.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -21,6 +33,58 @@ pub use fit::{gauss_newton_step, levenberg_marquardt, Fit, DAMPING};
 
 /// Largest number of reflections modelled.
 pub const MAX_REFLECTIONS: usize = 3;
+
+/// Largest number of falloff groups (fringe lengths) fitted; a schedule
+/// with more distinct lengths shares one κ over all of them.
+pub const MAX_GROUPS: usize = 4;
+
+/// Largest number of model parameters, `3 K + 1 + G`.
+pub const MAX_PARAMS: usize = 3 * MAX_REFLECTIONS + 1 + MAX_GROUPS;
+
+/// The modulation falloff: κ = 1/τ_max² of each falloff group
+/// ([`Design::falloff_group`]); indexed by group.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Falloff {
+    /// Groups in use, 1 ≤ G ≤ [`MAX_GROUPS`].
+    pub groups: usize,
+    /// κ per group (entries past `groups` unused).
+    pub kappa: [f64; MAX_GROUPS],
+}
+
+impl Falloff {
+    /// The same κ in each of `groups` groups.
+    pub fn uniform(groups: usize, kappa: f64) -> Self {
+        Falloff {
+            groups: groups.clamp(1, MAX_GROUPS),
+            kappa: [kappa; MAX_GROUPS],
+        }
+    }
+
+    /// κ of the groups in use.
+    pub fn values(&self) -> &[f64] {
+        &self.kappa[..self.groups]
+    }
+
+    /// Whether every group's κ lies in `[lo, hi]`.
+    pub fn within(&self, lo: f64, hi: f64) -> bool {
+        self.values().iter().all(|&k| k >= lo && k <= hi)
+    }
+}
+
+impl std::ops::Index<usize> for Falloff {
+    type Output = f64;
+    #[inline]
+    fn index(&self, g: usize) -> &f64 {
+        &self.kappa[g]
+    }
+}
+
+impl std::ops::IndexMut<usize> for Falloff {
+    #[inline]
+    fn index_mut(&mut self, g: usize) -> &mut f64 {
+        &mut self.kappa[g]
+    }
+}
 
 /// What the model needs of one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,16 +106,20 @@ pub struct Axis {
     pub b: f64,
     /// s at (0, 0).
     pub c: f64,
+    /// `L₄₅ / L`: how much finer this direction's fringes are on the screen
+    /// than the diagonals' at equal τ ([`FringeAxis::stretch_from_diagonal`]).
+    pub stretch: f64,
 }
 
 impl Axis {
-    /// The axis of a [`FringeAxis`].
-    pub fn from_fringe(f: &FringeAxis) -> Self {
+    /// The axis of a [`FringeAxis`] on a `width × height` screen.
+    pub fn from_fringe(f: &FringeAxis, width: u32, height: u32) -> Self {
         let (a, b) = f.gradient();
         Axis {
             a,
             b,
             c: f.s(0.0, 0.0),
+            stretch: f.stretch_from_diagonal(width, height),
         }
     }
 
@@ -71,9 +139,75 @@ pub struct Design {
     pub axes: Vec<Axis>,
     /// Directions in degrees, same order.
     pub directions_deg: Vec<f64>,
+    /// Falloff group of each axis (see the module doc): axes of equal
+    /// fringe length share one.
+    pub falloff_group: Vec<usize>,
 }
 
 impl Design {
+    /// The design of `frames` on `axes` (directions `directions_deg`), with
+    /// the axes grouped by fringe length (equal [`Axis::stretch`] to 1e-9).
+    /// More than [`MAX_GROUPS`] lengths share one group (logged).
+    pub fn new(frames: Vec<FrameMeta>, axes: Vec<Axis>, directions_deg: Vec<f64>) -> Design {
+        let mut lengths: Vec<f64> = Vec::new();
+        let mut falloff_group: Vec<usize> = axes
+            .iter()
+            .map(|ax| {
+                match lengths
+                    .iter()
+                    .position(|&l| (l - ax.stretch).abs() <= 1e-9 * l.abs())
+                {
+                    Some(g) => g,
+                    None => {
+                        lengths.push(ax.stretch);
+                        lengths.len() - 1
+                    }
+                }
+            })
+            .collect();
+        if lengths.len() > MAX_GROUPS {
+            log::warn!(
+                "directions {directions_deg:?} have {} fringe lengths; more than {MAX_GROUPS} \
+                 share one modulation falloff κ",
+                lengths.len()
+            );
+            falloff_group.fill(0);
+        }
+        Design {
+            frames,
+            axes,
+            directions_deg,
+            falloff_group,
+        }
+    }
+
+    /// Number of falloff groups (1 without axes).
+    pub fn falloff_groups(&self) -> usize {
+        self.falloff_group.iter().max().map_or(1, |&g| g + 1)
+    }
+
+    /// The falloff groups' κ of a blur that acts on the screen period, with
+    /// `kappa` that of the diagonals: `κ (L₄₅/L_g)²` (what a physical scene
+    /// shows, for the bounds and predictions; the fits estimate each group's).
+    pub fn physical_falloff(&self, kappa: f64) -> Falloff {
+        let mut f = Falloff::uniform(self.falloff_groups(), kappa);
+        for (ax, &g) in self.axes.iter().zip(&self.falloff_group) {
+            f[g] = kappa * ax.stretch * ax.stretch;
+        }
+        f
+    }
+
+    /// The same starting κ in every falloff group.
+    pub fn uniform_falloff(&self, kappa: f64) -> Falloff {
+        Falloff::uniform(self.falloff_groups(), kappa)
+    }
+
+    /// κ of frame `f`'s group in `falloff`.
+    #[inline]
+    pub fn kappa_of(&self, f: &FrameMeta, falloff: &Falloff) -> f64 {
+        falloff[self.falloff_group[f.dir]]
+    }
+
     /// A pixel's separation of its reflections given `seps`, that along
     /// each axis: over the pairs of non-parallel axes, the largest of the
     /// pair's smaller one (two directions that each see the reflections
@@ -127,14 +261,19 @@ pub struct Params {
     pub amp: [f64; MAX_REFLECTIONS],
     /// Screen points (u_k, v_k), screen px.
     pub uv: [[f64; 2]; MAX_REFLECTIONS],
-    /// κ = 1/τ_max², falloff of the modulation.
-    pub kappa: f64,
+    /// κ = 1/τ_max² of each falloff group.
+    pub kappa: Falloff,
 }
 
 impl Params {
-    /// Number of free parameters, 3K + 2.
+    /// Number of free parameters, 3K + 1 + G.
     pub fn len(&self) -> usize {
-        3 * self.k + 2
+        3 * self.k + 1 + self.kappa.groups
+    }
+
+    /// Index of falloff group g's κ in the parameter vector.
+    pub fn kappa_index(&self, g: usize) -> usize {
+        1 + 3 * self.k + g
     }
 
     /// Always false (a model has at least A, B_1, u_1, v_1, κ).
@@ -151,7 +290,9 @@ impl Params {
             p.uv[j][0] += d[1 + k + 2 * j];
             p.uv[j][1] += d[2 + k + 2 * j];
         }
-        p.kappa += d[1 + 3 * k];
+        for g in 0..self.kappa.groups {
+            p.kappa[g] += d[1 + 3 * k + g];
+        }
         p
     }
 
@@ -176,7 +317,8 @@ pub struct Normal {
 pub(crate) fn eval_row(design: &Design, f: &FrameMeta, p: &Params, row: &mut [f64]) -> f64 {
     let ax = design.axes[f.dir];
     let t = f.tau;
-    let e = (-p.kappa * t * t).exp();
+    let group = design.falloff_group[f.dir];
+    let e = (-p.kappa[group] * t * t).exp();
     let k = p.k;
     let mut sum_bc = 0.0;
     row[0] = 1.0;
@@ -189,17 +331,27 @@ pub(crate) fn eval_row(design: &Design, f: &FrameMeta, p: &Params, row: &mut [f6
         row[2 + k + 2 * j] = g * ax.b;
         sum_bc += p.amp[j] * c;
     }
-    row[1 + 3 * k] = -t * t * e * sum_bc;
+    for g in 0..p.kappa.groups {
+        row[1 + 3 * k + g] = 0.0;
+    }
+    row[1 + 3 * k + group] = -t * t * e * sum_bc;
     p.offset + e * sum_bc
 }
 
 /// One pass over the used samples: RSS, JᵀJ and Jᵀr at `p`.
 pub fn normal_equations(design: &Design, index: &[u32], y: &[f64], p: &Params) -> Normal {
     // Fixed sizes let the compiler unroll the JᵀJ update (the hot loop).
-    match p.k {
-        1 => normal_fixed::<5>(design, index, y, p),
-        2 => normal_fixed::<8>(design, index, y, p),
-        _ => normal_fixed::<11>(design, index, y, p),
+    match p.len() {
+        5 => normal_fixed::<5>(design, index, y, p),
+        6 => normal_fixed::<6>(design, index, y, p),
+        7 => normal_fixed::<7>(design, index, y, p),
+        8 => normal_fixed::<8>(design, index, y, p),
+        9 => normal_fixed::<9>(design, index, y, p),
+        10 => normal_fixed::<10>(design, index, y, p),
+        11 => normal_fixed::<11>(design, index, y, p),
+        12 => normal_fixed::<12>(design, index, y, p),
+        13 => normal_fixed::<13>(design, index, y, p),
+        _ => normal_fixed::<MAX_PARAMS>(design, index, y, p),
     }
 }
 
@@ -208,10 +360,10 @@ fn normal_fixed<const N: usize>(design: &Design, index: &[u32], y: &[f64], p: &P
     let mut jtj = [[0.0; N]; N];
     let mut jtr = [0.0; N];
     let mut rss = 0.0;
-    let mut full = [0.0; 3 * MAX_REFLECTIONS + 2];
+    let mut full = [0.0; MAX_PARAMS];
     for (&i, &yi) in index.iter().zip(y) {
         let f = eval_row(design, &design.frames[i as usize], p, &mut full);
-        let row: [f64; N] = full[..N].try_into().expect("N ≤ 11");
+        let row: [f64; N] = full[..N].try_into().expect("N ≤ MAX_PARAMS");
         let r = yi - f;
         rss += r * r;
         for a in 0..N {
@@ -260,7 +412,7 @@ pub trait Samples {
         dir: usize,
         [mu0, step, offset]: [f64; 3],
         count: usize,
-        kappa: f64,
+        kappa: Falloff,
         point: &dyn Fn(f64) -> [f64; 2],
     ) -> Vec<([f64; 2], f64)> {
         (0..count)
@@ -294,7 +446,7 @@ pub struct SeriesSamples<'a> {
     y_by_frame: &'a [f64],
     /// Per direction: its used frames, values and envelope at `kappa_dir`.
     dirs: Vec<(Vec<u32>, Vec<f64>, Vec<f64>)>,
-    kappa_dir: f64,
+    kappa_dir: Falloff,
 }
 
 impl<'a> SeriesSamples<'a> {
@@ -304,7 +456,7 @@ impl<'a> SeriesSamples<'a> {
         design: &'a Design,
         plans: &'a super::periodogram::SpectrumPlans,
         y_by_frame: &'a [f64],
-        kappa0: f64,
+        kappa0: Falloff,
     ) -> Self {
         let index: Vec<u32> = (0..y_by_frame.len() as u32)
             .filter(|&i| y_by_frame[i as usize].is_finite())
@@ -318,7 +470,7 @@ impl<'a> SeriesSamples<'a> {
                     .filter(|(&i, _)| design.frames[i as usize].dir == dir)
                     .map(|(&i, &v)| (i, v))
                     .unzip();
-                let env = envelope(design, &idx, kappa0);
+                let env = envelope(design, &idx, &kappa0);
                 (idx, yd, env)
             })
             .collect();
@@ -367,14 +519,14 @@ impl Samples for SeriesSamples<'_> {
     }
 }
 
-/// `exp(−κ τ_i²)` of the frames in `index`: the envelope [`linear_amplitudes_in`]
+/// `exp(−κ_g τ_i²)` of the frames in `index`: the envelope [`linear_amplitudes_in`]
 /// reuses across the screen points it is asked about.
-pub fn envelope(design: &Design, index: &[u32], kappa: f64) -> Vec<f64> {
+pub fn envelope(design: &Design, index: &[u32], kappa: &Falloff) -> Vec<f64> {
     index
         .iter()
         .map(|&i| {
-            let t = design.frames[i as usize].tau;
-            (-kappa * t * t).exp()
+            let f = &design.frames[i as usize];
+            (-design.kappa_of(f, kappa) * f.tau * f.tau).exp()
         })
         .collect()
 }
@@ -383,7 +535,7 @@ pub fn envelope(design: &Design, index: &[u32], kappa: f64) -> Vec<f64> {
 /// (the linear part of the model), by normal equations on (1 + K) columns;
 /// returns them with the residual sum of squares.
 pub fn linear_amplitudes(design: &Design, index: &[u32], y: &[f64], p: &Params) -> (Params, f64) {
-    linear_amplitudes_in(design, index, y, &envelope(design, index, p.kappa), p)
+    linear_amplitudes_in(design, index, y, &envelope(design, index, &p.kappa), p)
 }
 
 /// [`linear_amplitudes`] with the envelope `env` of `p.kappa` given.
@@ -435,14 +587,13 @@ impl Design {
     /// tests of direction geometry need.
     pub(crate) fn of_directions(dirs: &[f64], width: u32, height: u32) -> Design {
         use crate::acquire::patterns::FringeAxis;
-        Design {
-            frames: Vec::new(),
-            axes: dirs
-                .iter()
-                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, width, height)))
+        Design::new(
+            Vec::new(),
+            dirs.iter()
+                .map(|&d| Axis::from_fringe(&FringeAxis::new(d, width, height), width, height))
                 .collect(),
-            directions_deg: dirs.to_vec(),
-        }
+            dirs.to_vec(),
+        )
     }
 }
 

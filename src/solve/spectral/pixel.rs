@@ -9,7 +9,7 @@ use std::cell::OnceCell;
 use nalgebra::DMatrix;
 
 use super::model::{
-    levenberg_marquardt, Design, Fit, ParamCholesky, Params, Samples, MAX_REFLECTIONS,
+    levenberg_marquardt, Design, Falloff, Fit, ParamCholesky, Params, Samples, MAX_REFLECTIONS,
 };
 use super::periodogram::SpectrumPlans;
 use super::{PixelFlags, PixelResult};
@@ -48,15 +48,15 @@ pub struct PixelContext<'a> {
     /// plate can still send a back reflection here, and a one-reflection fit
     /// of two would be wrong.
     pub borrowed_offset: Option<[f64; 2]>,
-    /// Starting κ = 1/τ_max².
-    pub kappa0: f64,
+    /// Starting κ = 1/τ_max², per falloff group.
+    pub kappa0: Falloff,
     /// Whether a third reflection may be modelled.
     pub allow_third: bool,
     /// LM iteration cap.
     pub max_iter: usize,
 }
 
-fn start(k: usize, uv: &[[f64; 2]], kappa: f64) -> Params {
+fn start(k: usize, uv: &[[f64; 2]], kappa: Falloff) -> Params {
     let mut p = Params {
         k,
         offset: 0.0,
@@ -79,7 +79,7 @@ fn pair_start<S: Samples + ?Sized>(
     data: &S,
     mus: &[f64],
     d: &[f64; 2],
-    kappa: f64,
+    kappa: Falloff,
 ) -> Params {
     let mut pair_mu = vec![[0.0; 2]; mus.len()];
     for (dir, ax) in ctx.design.axes.iter().enumerate() {

@@ -9,7 +9,7 @@ use super::batch::{CpuFits, FitBackend, FitBatch, FitSettings};
 use super::maps::SpectralMaps;
 use super::model::censored::Clip;
 use super::model::{
-    eval_row, Axis, Design, FrameMeta, Params, Samples, SeriesSamples, MAX_REFLECTIONS,
+    eval_row, Axis, Design, Falloff, FrameMeta, Params, Samples, SeriesSamples, MAX_PARAMS,
 };
 use super::periodogram::SpectrumPlans;
 use super::phase::{self, PhaseModel, PhaseSchedule, PhaseSettings, Response};
@@ -313,7 +313,7 @@ impl SpectralSolver {
         };
         let settings = FitSettings {
             saturation: sat,
-            kappa0: self.config.kappa_start(&self.design),
+            kappa0: self.config.falloff_start(&self.design),
             allow_third: self.config.third_reflection,
             max_iter: self.config.max_iter,
             warm_starts: self.config.warm_starts,
@@ -409,9 +409,9 @@ impl SpectralSolver {
         self.prior.borrowed[q].is_some()
     }
 
-    /// Starting κ = 1/τ_max² of the fits.
-    pub fn kappa_start(&self) -> f64 {
-        self.config.kappa_start(&self.design)
+    /// Starting κ = 1/τ_max² of the fits, in every falloff group.
+    pub fn kappa_start(&self) -> Falloff {
+        self.config.falloff_start(&self.design)
     }
 
     /// [`Self::with_samples`] with the clipped samples standing at their
@@ -431,7 +431,7 @@ impl SpectralSolver {
         let sat = self.saturation();
         let clip = Clip::new(sat);
         let level = |i: usize, v: u16| {
-            let mut row = [0.0; 3 * MAX_REFLECTIONS + 2];
+            let mut row = [0.0; MAX_PARAMS];
             let mu = eval_row(&self.design, &self.design.frames[i], p, &mut row);
             clip.imputed(v, mu, sigma)
         };
@@ -545,11 +545,8 @@ pub fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, Spectra
     let axes: Vec<Axis> = directions_deg
         .iter()
         .map(|&d| {
-            Axis::from_fringe(&FringeAxis::new(
-                d,
-                station.screen.width,
-                station.screen.height,
-            ))
+            let (w, h) = (station.screen.width, station.screen.height);
+            Axis::from_fringe(&FringeAxis::new(d, w, h), w, h)
         })
         .collect();
     let spread = axes
@@ -567,9 +564,5 @@ pub fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, Spectra
             ),
         });
     }
-    Ok(Design {
-        frames: metas,
-        axes,
-        directions_deg,
-    })
+    Ok(Design::new(metas, axes, directions_deg))
 }

@@ -6,7 +6,7 @@ use std::convert::Infallible;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Normal, Params, Samples, MAX_REFLECTIONS};
+use super::{Normal, Params, Samples};
 use crate::kernels::lm::{self, Damping, LeastSquares, Linearisation};
 use crate::kernels::SmallCholesky;
 
@@ -59,7 +59,7 @@ const RSS_TOL: f64 = 1e-11;
 const CHI2_TOL: f64 = 1e-3;
 
 /// Most parameters of a model (three reflections).
-const MAX_PARAMS: usize = 3 * MAX_REFLECTIONS + 2;
+use super::MAX_PARAMS;
 
 /// The Cholesky factorisation of a model's JᵀJ, on the stack.
 pub(crate) type ParamCholesky = SmallCholesky<MAX_PARAMS>;

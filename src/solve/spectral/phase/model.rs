@@ -347,18 +347,16 @@ mod tests {
                 a: 1e-3,
                 b: 0.5e-3,
                 c: 0.1,
+                stretch: 1.0,
             },
             Axis {
                 a: -0.4e-3,
                 b: 1e-3,
                 c: 0.6,
+                stretch: 1.0,
             },
         ];
-        Design {
-            frames,
-            axes,
-            directions_deg: vec![0.0, 90.0],
-        }
+        Design::new(frames, axes, vec![0.0, 90.0])
     }
 
     /// The analytic gradient against central differences (the oracle).

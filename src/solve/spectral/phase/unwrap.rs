@@ -141,15 +141,16 @@ mod tests {
                 })
             })
             .collect();
-        Design {
+        Design::new(
             frames,
-            axes: vec![Axis {
+            vec![Axis {
                 a: 1e-3,
                 b: 0.0,
                 c: 0.0,
+                stretch: 1.0,
             }],
-            directions_deg: vec![0.0],
-        }
+            vec![0.0],
+        )
     }
 
     /// Noise-free cosines at any s come back exactly, for τ sets whose

@@ -47,8 +47,9 @@ pub(super) fn finalize<S: Samples + ?Sized>(
     out.model = p.k as u8;
     out.iterations = fit.iterations as u16;
     out.residual_rms = (fit.rss / n as f64).sqrt();
-    out.tau_max = if p.kappa > 0.0 {
-        p.kappa.sqrt().recip()
+    // The first direction's group: the diagonals' on the paper's schedules.
+    out.tau_max = if p.kappa[0] > 0.0 {
+        p.kappa[0].sqrt().recip()
     } else {
         f64::INFINITY
     };

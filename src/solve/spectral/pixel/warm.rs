@@ -141,7 +141,8 @@ pub(super) fn warm_fits<S: Samples + ?Sized>(
     }
     let near = |a: f64, b: f64| (a - b).abs() <= WARM_CHANGE * b.abs();
     let q = &seed.two;
-    if !(near(p.amp[0], q.amp[0]) && near(p.amp[1], q.amp[1]) && near(p.kappa, q.kappa)) {
+    let kappas_near = (0..p.kappa.groups).all(|g| near(p.kappa[g], q.kappa[g]));
+    if !(near(p.amp[0], q.amp[0]) && near(p.amp[1], q.amp[1]) && kappas_near) {
         return None;
     }
     let inv = two.inv.as_ref()?;

@@ -13,7 +13,7 @@ use super::sums::DirSums;
 use super::tables::StatisticsTables;
 use super::{Statistics, C64, GRID_BINS};
 use crate::kernels::sincos_cycles;
-use crate::solve::spectral::model::{Design, Normal, Params, Samples, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{Design, Falloff, Normal, Params, Samples, MAX_PARAMS};
 
 impl Statistics {
     /// Pixel `p`'s statistics with samples at 0 or at/above `saturation`
@@ -248,7 +248,7 @@ impl StatisticsSamples<'_> {
     /// direction `dir` alone when given.
     pub(super) fn inside(&self, p: &Params, margin_bins: f64, dir: Option<usize>) -> bool {
         let [klo, khi] = self.tables.kappa_range;
-        if !(p.kappa >= klo && p.kappa <= khi) {
+        if !p.kappa.within(klo, khi) {
             return false;
         }
         self.dirs
@@ -291,13 +291,14 @@ impl StatisticsSamples<'_> {
             self.dir_sums(d, p, true, data, &mut s);
             let ax = self.design.axes[d];
             // Parameter → (column, factor).
-            let mut map = [(0usize, 0.0f64); 3 * MAX_REFLECTIONS + 2];
+            // The κ of other falloff groups: no column here (factor 0).
+            let mut map = [(0usize, 0.0f64); MAX_PARAMS];
             for j in 0..k {
                 map[1 + j] = (j, 1.0);
                 map[1 + k + 2 * j] = (k + j, ax.a);
                 map[2 + k + 2 * j] = (k + j, ax.b);
             }
-            map[1 + 3 * k] = (2 * k, 1.0);
+            map[p.kappa_index(self.design.falloff_group[d])] = (2 * k, 1.0);
             let g = |x: usize, y: usize| s.g[x.min(y)][x.max(y)];
             rss += -2.0 * (s.y[m] - self.y0 * s.e[m]) + 2.0 * ac * s.e[m] + g(m, m);
             jtr[0] -= s.e[m];
@@ -387,7 +388,11 @@ impl Samples for StatisticsSamples<'_> {
         let [klo, khi] = self.tables.kappa_range;
         // A quarter bin inside the band and 10 % inside the κ range: a fit
         // stopped at the edge by the bounds is not reported.
-        p.kappa > 0.9 * klo && p.kappa < 0.9 * khi && self.inside(p, 0.25 + 0.5 * GRID_BINS, None)
+        p.kappa
+            .values()
+            .iter()
+            .all(|&k| k > 0.9 * klo && k < 0.9 * khi)
+            && self.inside(p, 0.25 + 0.5 * GRID_BINS, None)
     }
 
     fn band_limited(&self) -> bool {
@@ -399,9 +404,10 @@ impl Samples for StatisticsSamples<'_> {
         dir: usize,
         scan: [f64; 3],
         count: usize,
-        kappa: f64,
+        kappa: Falloff,
         _point: &dyn Fn(f64) -> [f64; 2],
     ) -> Vec<([f64; 2], f64)> {
+        let kappa = kappa[self.design.falloff_group[dir]];
         self.band_pair_scan(dir, scan, count, kappa)
     }
 }

@@ -206,8 +206,9 @@ impl StatisticsSamples<'_> {
         let k = p.k;
         let q = t.gram.len();
         let tau = &t.gram.tau[..q];
+        let kappa = p.kappa[self.design.falloff_group[d]];
         for (ej, &tj) in e.iter_mut().zip(tau) {
-            *ej = exp_fast_with::<FMA>(-p.kappa * tj * tj);
+            *ej = exp_fast_with::<FMA>(-kappa * tj * tj);
         }
         for j in 0..k {
             let dl = ax.s(p.uv[j][0], p.uv[j][1]) - pd.mu_c;

@@ -10,7 +10,11 @@ use crate::solve::spectral::periodogram::SpectrumPlans;
 /// The paper's schedule (±45°, τ = 0.2…200) on a 1600×1200 screen, with
 /// a phase shift on every other τ so that the phases are exercised.
 fn design() -> Design {
-    let dirs = [45.0, -45.0];
+    design_of(&[45.0, -45.0])
+}
+
+/// [`design`] on the directions `dirs`.
+fn design_of(dirs: &[f64]) -> Design {
     let mut frames = Vec::new();
     for (d, _) in dirs.iter().enumerate() {
         for k in 0..1000 {
@@ -21,23 +25,23 @@ fn design() -> Design {
             });
         }
     }
-    Design {
+    Design::new(
         frames,
-        axes: dirs
-            .iter()
-            .map(|&a| Axis::from_fringe(&FringeAxis::new(a, 1600, 1200)))
+        dirs.iter()
+            .map(|&a| Axis::from_fringe(&FringeAxis::new(a, 1600, 1200), 1600, 1200))
             .collect(),
-        directions_deg: dirs.to_vec(),
-    }
+        dirs.to_vec(),
+    )
 }
 
-fn truth() -> Params {
+/// Two reflections, each falloff group of `design` at the physical κ.
+fn truth(design: &Design) -> Params {
     Params {
         k: 2,
         offset: 1800.0,
         amp: [900.0, 700.0, 0.0],
         uv: [[800.3, 600.7], [808.9, 603.1], [0.0; 2]],
-        kappa: 1.3 / 200.0f64.powi(2),
+        kappa: design.physical_falloff(1.3 / 200.0f64.powi(2)),
     }
 }
 
@@ -53,7 +57,7 @@ fn series(design: &Design, p: &Params, noise: f64) -> Vec<u16> {
                 return 4095;
             }
             let ax = design.axes[f.dir];
-            let e = (-p.kappa * f.tau * f.tau).exp();
+            let e = (-design.kappa_of(f, &p.kappa) * f.tau * f.tau).exp();
             let mut v = p.offset;
             for j in 0..p.k {
                 let x = f.tau * ax.s(p.uv[j][0], p.uv[j][1]) + f.phase_cycles;
@@ -71,17 +75,30 @@ fn series(design: &Design, p: &Params, noise: f64) -> Vec<u16> {
 /// (About 100 lines: one scenario, every quantity compared in turn.)
 #[test]
 fn statistics_reproduce_the_series_normal_equations() {
-    let design = design();
+    statistics_reproduce_the_series_on(&[45.0, -45.0]);
+}
+
+/// The same with the plain directions beside the diagonals: three falloff
+/// groups, each direction's sums carrying its own group's κ.
+#[test]
+fn statistics_reproduce_the_series_with_three_falloff_groups() {
+    statistics_reproduce_the_series_on(&[45.0, -45.0, 0.0, 90.0]);
+}
+
+fn statistics_reproduce_the_series_on(dirs: &[f64]) {
+    let design = design_of(dirs);
+    assert_eq!(design.falloff_groups(), if dirs.len() == 2 { 1 } else { 3 });
     let plans = SpectrumPlans::new(&design);
-    let t = truth();
+    let t = truth(&design);
     let raw = series(&design, &t, 40.0);
     let centres: Vec<Vec<f64>> = design
         .axes
         .iter()
         .map(|ax| vec![0.5 * (ax.s(800.0, 600.0) + ax.s(809.0, 603.0))])
         .collect();
-    let band: Vec<f64> = vec![3.0 / 199.8; 2];
+    let band: Vec<f64> = vec![3.0 / 199.8; dirs.len()];
     let k0 = 200.0f64.powi(-2);
+    let k0s = design.uniform_falloff(k0);
     let mut stats = Statistics::new(&design, &centres, &band, [-k0, 16.0 * k0], None).unwrap();
     for (r, chunk) in raw.chunks(STATS_BLOCK).enumerate() {
         stats.ingest(r * STATS_BLOCK, chunk.len(), chunk);
@@ -92,13 +109,15 @@ fn statistics_reproduce_the_series_normal_equations() {
         .iter()
         .map(|&v| if v >= 4095 { f64::NAN } else { f64::from(v) })
         .collect();
-    let series = SeriesSamples::new(&design, &plans, &y, k0);
+    let series = SeriesSamples::new(&design, &plans, &y, k0s);
     assert_eq!(excluded, raw.iter().filter(|&&v| v >= 4095).count());
     assert_eq!(statistics.count(), series.count());
     let mut off = t;
     off.uv[0][0] += 3.0;
     off.uv[1][1] -= 2.0;
-    off.kappa *= 1.7;
+    for g in 0..design.falloff_groups() {
+        off.kappa[g] *= 1.7 + 0.2 * g as f64;
+    }
     off.amp[1] *= 0.8;
     let mut one = t;
     one.k = 1;
@@ -144,8 +163,8 @@ fn statistics_reproduce_the_series_normal_equations() {
         let mu = ax.s(t.uv[0][0], t.uv[0][1]);
         let off = ax.s(t.uv[1][0], t.uv[1][1]) - mu;
         let args = [mu - 1.25 * off, 0.125 * off, off];
-        let a = series.pair_scan(d, args, 13, k0, &point);
-        let b = statistics.pair_scan(d, args, 13, k0, &point);
+        let a = series.pair_scan(d, args, 13, k0s, &point);
+        let b = statistics.pair_scan(d, args, 13, k0s, &point);
         for ((aa, ra), (ab, rb)) in a.iter().zip(&b) {
             assert!((ra - rb).abs() <= 1e-8 * ra, "{d}: {ra} vs {rb}");
             assert!((aa[0] - ab[0]).abs() < 1e-6 && (aa[1] - ab[1]).abs() < 1e-6);
@@ -186,7 +205,7 @@ fn portable_paths_match_the_dispatched_ones() {
         assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
     }
     let design = design();
-    let t = truth();
+    let t = truth(&design);
     let raw = series(&design, &t, 40.0);
     let centres: Vec<Vec<f64>> = design
         .axes
