@@ -60,6 +60,11 @@ pub struct TradeoffArgs {
     /// --seed): the achieved error is the RMS over them; default: --seed.
     #[arg(long, value_delimiter = ',')]
     seeds: Vec<u64>,
+    /// What the rendered falloff acts on, as `mfd simulate --falloff`:
+    /// tau (every direction alike) or screen-period (a blur's: a plain
+    /// direction's finer fringes fall off sooner).
+    #[arg(long, value_enum, default_value_t = mfd::sim::Falloff::Tau)]
+    falloff: mfd::sim::Falloff,
 }
 
 /// One grid point's outcome.
@@ -174,7 +179,7 @@ fn designed_rows(
         let mut per_seed = Vec::new();
         for &seed in &seeds {
             let t = Instant::now();
-            let solved = solve_frames(station, view, &d.frames, it, args.noise, seed + n as u64)?;
+            let solved = solve_frames(station, view, &d.frames, it, args, seed + n as u64)?;
             let row = surfaces(
                 station,
                 &solved,
@@ -276,12 +281,13 @@ fn solve_frames(
     view: &TracedView,
     frames: &[FrameInfo],
     it: usize,
-    noise: f64,
+    args: &TradeoffArgs,
     seed: u64,
 ) -> anyhow::Result<Solved> {
     let params = SimParams {
-        noise_frac: noise,
+        noise_frac: args.noise,
         seed,
+        falloff: args.falloff,
         ..SimParams::default()
     };
     let mut cam = Renderer::new(view, &station.screen, params)?;
@@ -348,6 +354,7 @@ fn spectral(
     let params = SimParams {
         noise_frac: args.noise,
         seed: args.seed + n as u64,
+        falloff: args.falloff,
         ..SimParams::default()
     };
     let mut cam = Renderer::new(view, &station.screen, params)?;
