@@ -294,14 +294,18 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts(engine: Engi
     }
 }
 
-/// The series engine alone: the statistics engine's band detection finds
-/// no signal on 64 % of these pixels (flag NO_SIGNAL | OUT_OF_BAND) with
-/// the falloff on τ and on the screen period alike when the directions'
-/// τ spans differ, as here; with every direction to τ = 150 it finds 99 %
-/// (falloff on τ) and 96 % (screen period). Left as found (the planner's
-/// stage check runs the engine `auto` will, so it reports this before any
-/// frame). With one κ for every direction (tried by grouping every axis
-/// together) this fails: S1 / S2 at 1.47× / 1.51× their bound.
+/// The series engine alone. The statistics engine finds the points on
+/// 36 % (screen period) and 39 % (falloff on τ) of these pixels, the rest
+/// flagged NO_SIGNAL | OUT_OF_BAND: with every direction at 300 frames to
+/// τ = 150 it finds 96 % and 99 %. Its band detection fails on the first
+/// direction of the schedule, whichever that is, on most pixels it
+/// searches (also with equal τ spans and unequal frame counts, and the
+/// reverse), and warm starts from the row neighbour hide that where they
+/// hold. Left as found (docs/figures.md, "Planned schedules"; the
+/// planner's stage check runs the engine `auto` will, so it reports this
+/// before any frame). With one κ for every direction (tried by grouping
+/// every axis together) this test fails: S1 / S2 at 1.47× / 1.51× their
+/// bound.
 #[test]
 fn four_directions_under_a_blurs_falloff_reach_the_bound() {
     let engine = Engine::Series;
