@@ -296,16 +296,13 @@ fn any_schedule_works_plain_directions_uneven_taus_and_phase_shifts(engine: Engi
 
 /// The series engine alone. The statistics engine finds the points on
 /// 36 % (screen period) and 39 % (falloff on τ) of these pixels, the rest
-/// flagged NO_SIGNAL | OUT_OF_BAND: with every direction at 300 frames to
-/// τ = 150 it finds 96 % and 99 %. Its band detection fails on the first
-/// direction of the schedule, whichever that is, on most pixels it
-/// searches (also with equal τ spans and unequal frame counts, and the
-/// reverse), and warm starts from the row neighbour hide that where they
-/// hold. Left as found (docs/figures.md, "Planned schedules"; the
-/// planner's stage check runs the engine `auto` will, so it reports this
-/// before any frame). With one κ for every direction (tried by grouping
-/// every axis together) this test fails: S1 / S2 at 1.47× / 1.51× their
-/// bound.
+/// flagged NO_SIGNAL | OUT_OF_BAND; with every direction at 300 frames to
+/// τ = 150 it finds 96 % and 99 %, and on ±45° alone with 300 and 200
+/// frames 99 %. Not diagnosed; left as found (docs/figures.md, "Planned
+/// schedules"; the planner's stage check runs the engine `auto` will, so
+/// it reports this before any frame). With one κ for every direction
+/// (tried by grouping every axis together) this test fails: S1 / S2 at
+/// 1.47× / 1.51× their bound.
 #[test]
 fn four_directions_under_a_blurs_falloff_reach_the_bound() {
     let engine = Engine::Series;
