@@ -68,11 +68,20 @@ fn five_percent_noise_reaches_the_bound(engine: Engine) {
         ..SimParams::default()
     };
     let r = run(&station(10.0), params, &paper_schedule(), engine);
-    for (k, (rms, bound, worst, found, expected)) in score(&r).into_iter().enumerate() {
-        eprintln!("5 % noise S{}: RMS {rms:.4} px, bound {bound:.4} px, ratio {:.3}, worst {worst:.3}, found {found}/{expected}", k + 1, rms / bound);
-        // The criterion: within 1.5× the Cramér–Rao bound. With
-        // ~1000 pixels the RMS itself scatters by ~2 %, so an efficient
-        // estimator sits near 1.0.
+    assert_near_the_bound(&r, "5 % noise");
+    // The reported uncertainty is the bound at the fitted point: errors
+    // divided by it must have unit RMS (±10 % for ~2000 coordinates, 5σ).
+    let z = error_over_sigma(&r, &[0]);
+    assert!((0.9..1.1).contains(&z), "{z}");
+}
+
+/// Per reflection: the points within 1.5× the Cramér–Rao bound (the
+/// issue's criterion; with ~1000 pixels the RMS itself scatters by ~2 %,
+/// so an efficient estimator sits near 1.0) and found on 99 % of the
+/// pixels that have them; `case` names the run in the printout.
+fn assert_near_the_bound(r: &Run, case: &str) {
+    for (k, (rms, bound, worst, found, expected)) in score(r).into_iter().enumerate() {
+        eprintln!("{case} S{}: RMS {rms:.4} px, bound {bound:.4} px, ratio {:.3}, worst {worst:.3}, found {found}/{expected}", k + 1, rms / bound);
         assert!(rms <= 1.5 * bound, "S{}: {rms} vs bound {bound}", k + 1);
         assert!(
             found as f64 >= 0.99 * expected as f64,
@@ -80,14 +89,20 @@ fn five_percent_noise_reaches_the_bound(engine: Engine) {
             k + 1
         );
     }
-    // The reported uncertainty is the bound at the fitted point: errors
-    // divided by it must have unit RMS (±10 % for ~2000 coordinates, 5σ).
+}
+
+/// RMS of error over reported σ over both coordinates of the
+/// `reflections` (0 front, 1 back) found, printed with their count.
+fn error_over_sigma(r: &Run, reflections: &[usize]) -> f64 {
     let mut z2 = Vec::new();
     for (q, px) in r.view.pixels.iter().enumerate() {
         let p = &r.maps.pixels[q];
-        if let (Ok(f), false) = (px.front, p.s[0][0].is_nan()) {
-            z2.push(((p.s[0][0] - f.u) / p.std[0][0]).powi(2));
-            z2.push(((p.s[0][1] - f.v) / p.std[0][1]).powi(2));
+        for &k in reflections {
+            let truth = [px.front, px.back][k];
+            if let (Ok(t), false) = (truth, p.s[k][0].is_nan()) {
+                z2.push(((p.s[k][0] - t.u) / p.std[k][0]).powi(2));
+                z2.push(((p.s[k][1] - t.v) / p.std[k][1]).powi(2));
+            }
         }
     }
     let z = (z2.iter().sum::<f64>() / z2.len() as f64).sqrt();
@@ -95,7 +110,7 @@ fn five_percent_noise_reaches_the_bound(engine: Engine) {
         "RMS of error / reported σ: {z:.3} over {} coordinates",
         z2.len()
     );
-    assert!((0.9..1.1).contains(&z), "{z}");
+    z
 }
 
 fn saturated_samples_are_left_out_not_averaged_in(engine: Engine) {
@@ -342,32 +357,10 @@ fn four_directions_under_a_blurs_falloff_reach_the_bound() {
         ..SimParams::default()
     };
     let r = run_patterns(&st, params, &patterns, config(engine));
-    for (k, (rms, bound, worst, found, expected)) in score(&r).into_iter().enumerate() {
-        eprintln!("four directions, screen-period falloff, 5 % noise S{}: RMS {rms:.4} px, bound {bound:.4} px, ratio {:.3}, worst {worst:.3}, found {found}/{expected}", k + 1, rms / bound);
-        assert!(rms <= 1.5 * bound, "S{}: {rms} vs bound {bound}", k + 1);
-        assert!(
-            found as f64 >= 0.99 * expected as f64,
-            "S{}: {found}/{expected}",
-            k + 1
-        );
-    }
+    assert_near_the_bound(&r, "four directions, screen-period falloff, 5 % noise");
     // Errors over the reported σ, both reflections: unit RMS (±10 % for
     // ~4000 coordinates, 5σ); a falloff wrong on some directions biases
     // the points and shows here first.
-    let mut z2 = Vec::new();
-    for (q, px) in r.view.pixels.iter().enumerate() {
-        let p = &r.maps.pixels[q];
-        for (k, t) in [px.front, px.back].iter().enumerate() {
-            if let (Ok(t), false) = (t, p.s[k][0].is_nan()) {
-                z2.push(((p.s[k][0] - t.u) / p.std[k][0]).powi(2));
-                z2.push(((p.s[k][1] - t.v) / p.std[k][1]).powi(2));
-            }
-        }
-    }
-    let z = (z2.iter().sum::<f64>() / z2.len() as f64).sqrt();
-    eprintln!(
-        "RMS of error / reported σ: {z:.3} over {} coordinates",
-        z2.len()
-    );
+    let z = error_over_sigma(&r, &[0, 1]);
     assert!((0.9..1.1).contains(&z), "{z}");
 }
