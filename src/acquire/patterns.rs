@@ -92,6 +92,14 @@ impl FringeAxis {
         FringeAxis::new(45.0, width, height).length_px / self.length_px
     }
 
+    /// κ of this direction under a blur that acts on the fringe's period
+    /// in screen pixels, `kappa_diagonal` being the diagonals':
+    /// `κ (L₄₅ / L)²` (the falloff `e(ℓτ)` of [`Self::stretch_from_diagonal`]).
+    pub fn physical_kappa(&self, kappa_diagonal: f64, width: u32, height: u32) -> f64 {
+        let l = self.stretch_from_diagonal(width, height);
+        kappa_diagonal * l * l
+    }
+
     /// The largest τ this screen can show in this direction: the display's
     /// Nyquist limit. Pixel centres sample the fringe; one period spans
     /// `L / τ` screen pixels along the fringe direction (`s` runs over

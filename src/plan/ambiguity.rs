@@ -223,8 +223,7 @@ pub fn ambiguity(
             let (w, h) = (station.screen.width, station.screen.height);
             let axis = FringeAxis::new(d, w, h);
             // The physical falloff of this direction's fringe length.
-            let l = axis.stretch_from_diagonal(w, h);
-            let (lobe, range) = direction_ambiguity(&taus, kappa * l * l, &axis);
+            let (lobe, range) = direction_ambiguity(&taus, axis.physical_kappa(kappa, w, h), &axis);
             DirectionAmbiguity {
                 direction_deg: d,
                 main_lobe_px: lobe,

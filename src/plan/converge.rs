@@ -316,8 +316,7 @@ pub fn convergence(
             let (w, h) = (station.screen.width, station.screen.height);
             let axis = FringeAxis::new(dir, w, h);
             // The physical falloff of this direction's fringe length.
-            let l = axis.stretch_from_diagonal(w, h);
-            let kappa = kappa * l * l;
+            let kappa = axis.physical_kappa(kappa, w, h);
             let limit = 2.0 * prior_spread_px / axis.length_px;
             tol_px = tol_px.min(0.01 * axis.length_px / tau_w(&taus, kappa));
             DirectionBasin {

@@ -264,13 +264,14 @@ pub fn stage_check(
     let full = ((1u32 << opts.radiometry.bit_depth.min(16)) - 1) as u16;
     let sat = config.saturation_counts.unwrap_or(full);
     let (mut ok, mut silent) = (0usize, 0usize);
+    let falloff0 = design.uniform_falloff(kappa0);
     for (i, &q) in pixels.iter().enumerate() {
         let ctx = PixelContext {
             design,
             plans: &plans,
             prior: &prior.pixels[q],
             borrowed_offset: None,
-            kappa0: design.uniform_falloff(kappa0),
+            kappa0: falloff0,
             allow_third: false,
             max_iter: config.max_iter,
         };
@@ -294,7 +295,7 @@ pub fn stage_check(
                 })
                 .collect();
             let excluded = y.iter().filter(|v| v.is_nan()).count();
-            let data = SeriesSamples::new(design, &plans, &y, design.uniform_falloff(kappa0));
+            let data = SeriesSamples::new(design, &plans, &y, falloff0);
             fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
         }
         ok += usize::from(found(&fits, &truth.pixels[q], two));
