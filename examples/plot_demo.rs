@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use mfd::report::plot::{coefficient_chart_png, height_map_png, line_plot_png, Panel, Series};
+use mfd::plot::{coefficient_chart_png, height_map_png, line_plot_png, Panel, Series};
 
 /// A 120×100 map: a circular aperture (NaN outside) holding astigmatism,
 /// coma and a ripple, in nm.
@@ -43,7 +43,7 @@ fn coefficients(n: usize) -> (Vec<f64>, Vec<f64>) {
 
 /// A convergence study: RMS error (nm) and compute time (s) against frames
 /// per direction, with a NaN (a failed run) in one series.
-fn convergence(dir: &std::path::Path) -> Result<(), mfd::report::plot::PlotError> {
+fn convergence(dir: &std::path::Path) -> Result<(), mfd::plot::PlotError> {
     let frames = [4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
     let curve = |a: f64, floor: f64| -> Vec<(f64, f64)> {
         frames

@@ -38,3 +38,7 @@
 //!   reflection), 2 = two internal round trips (S3, paper §5.1b).
 //! * **FFT.** Forward transforms unnormalised (`Σ x_n e^{−2πi kn/N}`), as
 //!   rustfft computes them.
+//! * **Arrays in files.** Every array of the formats has the length its spec
+//!   gives, read strictly by [`exact`].
+
+pub mod exact;

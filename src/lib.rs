@@ -45,6 +45,7 @@ pub mod kernels;
 pub mod live;
 pub mod optics;
 pub mod pipeline;
+pub mod plot;
 pub mod plan;
 pub mod report;
 pub mod sim;

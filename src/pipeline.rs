@@ -22,7 +22,7 @@ use crate::formats::surfaces_file::{
 };
 use crate::optics::station::{Dof, Station, StationUncertainty, UncertaintyError};
 use crate::report::pictures;
-use crate::report::plot::PlotError;
+use crate::plot::PlotError;
 use crate::report::summary::Summary;
 use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::report::height_grid;
@@ -37,10 +37,8 @@ pub mod result_dir;
 mod station_uncertainty;
 
 pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
-pub use estimator::{
-    surface_domain_preferred, surfaces_from_frames, withheld, DirectReport, Estimator,
-    DIRECT_BELOW_BINS,
-};
+pub use crate::solve::direct::DirectReport;
+pub use estimator::{surfaces_from_frames, withheld, Estimator};
 pub use result_dir::{InputFile, Inputs, Staged};
 
 use crate::budget::assemble::budget;

@@ -4,7 +4,7 @@
 //! of freedom move the total, not the split), one colour for each of the six
 //! largest contributors and one for the rest; front and back side by side.
 //!
-//! Text is DejaVu Sans, embedded once in `report::plot` and registered
+//! Text is DejaVu Sans, embedded once in `plot` and registered
 //! from there.
 
 use std::path::Path;
@@ -14,7 +14,7 @@ use plotters::prelude::*;
 use super::table::total_std_nm;
 use super::Budget;
 
-use crate::report::plot::{register_font, FAMILY};
+use crate::plot::{register_font, FAMILY};
 /// Contributors drawn in colours of their own.
 pub const TOP: usize = 6;
 const COLOURS: [RGBColor; TOP] = [

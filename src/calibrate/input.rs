@@ -2,7 +2,7 @@
 //! readings in the stage frame, target centroids, the reference flat's
 //! decoded screen points), independent of how they were loaded. The lead's
 //! session loader builds it from a session folder; the simulated sessions
-//! (`crate::sim::session`) build it from a known truth.
+//! (`crate::calibrate::simulate`) build it from a known truth.
 
 use nalgebra::{Matrix2, Point2, Vector3};
 

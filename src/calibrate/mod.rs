@@ -51,6 +51,7 @@ mod rules;
 pub mod screen_mark;
 pub mod session;
 pub mod session_file;
+pub mod simulate;
 mod spot_background;
 pub mod spread;
 

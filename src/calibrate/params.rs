@@ -348,7 +348,7 @@ mod tests {
     use super::*;
 
     fn state() -> State {
-        let station = crate::sim::session::example_truth().unwrap();
+        let station = crate::calibrate::simulate::example_truth().unwrap();
         State {
             frame: WorldFrame {
                 plane: [12.3, 0.004, -0.003],

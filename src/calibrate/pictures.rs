@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use super::calibration::Calibration;
 use super::input::CalibrationInput;
 use super::residuals::flat_reflection_uv;
-use crate::report::plot::{height_map, line_plot_png, Format, HeightMap, Panel, PlotError, Series};
+use crate::plot::{height_map, line_plot_png, Format, HeightMap, Panel, PlotError, Series};
 
 /// The flat map's picture has at most this many columns (the sensor's
 /// pixels are gathered into cells of equal size).

@@ -11,7 +11,7 @@ use plotters::prelude::*;
 
 use super::calibration::Calibration;
 use super::input::CalibrationInput;
-use crate::report::plot::{register_font, PlotError, FAMILY};
+use crate::plot::{register_font, PlotError, FAMILY};
 
 /// Targets whose world heights differ by less than this share a layer, mm
 /// (layers are placed tens of millimetres apart; the stage noise is µm).

@@ -190,7 +190,7 @@ mod tests {
 
     #[test]
     fn dlt_recovers_an_exact_pinhole() {
-        let mut station = crate::sim::session::example_truth().unwrap();
+        let mut station = crate::calibrate::simulate::example_truth().unwrap();
         station.camera.distortion = None;
         let cam = &station.camera;
         let world: Vec<Point3<f64>> = (0..24)

@@ -42,7 +42,7 @@ pub struct SessionFile {
 #[serde(deny_unknown_fields)]
 pub struct SessionElement {
     /// Stage x, y of the element's centre, mm (defines the world origin).
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub center_stage_mm: [f64; 2],
     /// Measured thickness, mm.
     pub thickness_mm: f64,
@@ -59,7 +59,7 @@ pub struct SessionElement {
 #[serde(deny_unknown_fields)]
 pub struct StagePoint {
     /// Stage x, y, z of the PSM's focus, mm.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub stage_mm: [f64; 3],
 }
 
@@ -68,7 +68,7 @@ pub struct StagePoint {
 #[serde(deny_unknown_fields)]
 pub struct TargetPoint {
     /// Stage x, y, z of the target, mm.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub stage_mm: [f64; 3],
     /// A camera frame of the target, relative to `session.toml` (one of
     /// `image` and `image_px`).
@@ -77,7 +77,7 @@ pub struct TargetPoint {
     /// The centroid itself, pixel-centre convention (one of `image` and `image_px`).
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub image_px: Option<[f64; 2]>,
@@ -88,10 +88,10 @@ pub struct TargetPoint {
 #[serde(deny_unknown_fields)]
 pub struct ScreenPoint {
     /// Stage x, y, z, mm.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub stage_mm: [f64; 3],
     /// `(u, v)` of the mark, spec convention.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub screen_px: [f64; 2],
 }
 

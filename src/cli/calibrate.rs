@@ -264,9 +264,9 @@ fn capture(args: &CaptureArgs) -> anyhow::Result<()> {
         .context("--stage-mm: expected three finite numbers X,Y,Z in mm")?;
     let spec: CameraSpec = args.camera.parse()?;
     let mut camera = if spec.is_simulated() {
-        camera::open_for_target(&spec, simulated_target(args, stage)?)?
+        mfd::live::camera::open_for_target(&spec, simulated_target(args, stage)?)?
     } else {
-        camera::open(&spec, None)?
+        mfd::live::camera::open(&spec, None)?
     };
     let config = CameraConfig {
         exposure_us: args.exposure_us,

@@ -224,7 +224,7 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
     } else {
         None
     };
-    let camera = camera::open(&spec, sim)?;
+    let camera = mfd::live::camera::open(&spec, sim)?;
     if spec.is_simulated() {
         display = Box::new(MirroredDisplay::new(display, screen));
     }

@@ -19,7 +19,7 @@ use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::pipeline::{surfaces_from_frames, Estimator};
 use mfd::report::metrics::rms_difference_nm;
-use mfd::report::plot::{line_plot_png, Panel, Series};
+use mfd::plot::{line_plot_png, Panel, Series};
 use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};
 use mfd::solve::spectral::{SpectralConfig, SpectralMaps, SpectralSolver};
 use mfd::solve::surfaces::lm::LmOptions;

@@ -120,5 +120,5 @@ pub enum CompareError {
     Surfaces(#[from] crate::formats::surfaces_file::SurfacesFileError),
     /// A picture could not be drawn.
     #[error(transparent)]
-    Plot(#[from] crate::report::plot::PlotError),
+    Plot(#[from] crate::plot::PlotError),
 }

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{CompareError, Comparison};
-use crate::report::plot::{coefficient_chart_png, height_map, Extent, Format, HeightMap, MAX_BARS};
+use crate::plot::{coefficient_chart_png, height_map, Extent, Format, HeightMap, MAX_BARS};
 use crate::solve::surfaces::report::REMOVED_TERMS;
 
 /// Draws the pictures into `dir` (created if missing); returns each file

@@ -4,7 +4,6 @@
 //! file lives with the station ([`crate::optics::station`]), the acquisition
 //! manifest with the acquisition ([`crate::acquire::acquisition`]).
 
-pub mod exact;
 pub mod image_io;
 pub mod npy;
 pub mod surfaces_file;

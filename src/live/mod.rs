@@ -21,6 +21,7 @@
 //! [`Counters`], and shows nothing new meanwhile. Memory stays bounded by
 //! `capacity` frames per consumer.
 
+pub mod camera;
 mod measurement;
 mod recorder;
 mod sequencer;

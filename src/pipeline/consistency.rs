@@ -26,12 +26,12 @@
 //!
 //! Written by hand: it is a few robust statistics over the maps.
 
-use serde::{Deserialize, Serialize};
 
 use crate::acquire::patterns::FringeAxis;
 use crate::optics::station::Station;
 use crate::optics::trace::TracedView;
 use crate::plan::PlanOptions;
+pub use crate::report::records::Consistency;
 use crate::solve::spectral::model::Design;
 use crate::solve::spectral::{PixelFlags, SpectralMaps};
 
@@ -60,37 +60,6 @@ pub const FAR_SIGMAS: f64 = 5.0;
 
 /// Fewest measured pixels for the global test to be made.
 pub const MIN_TESTED_PIXELS: usize = 50;
-
-/// The station check in `summary.json` (`"consistency"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Consistency {
-    /// Whether the screen points agree with the station.
-    pub consistent: bool,
-    /// Whether the test was made (enough measured pixels).
-    pub tested: bool,
-    /// Pixels compared (with a measured front point and a predicted one).
-    pub pixels: usize,
-    /// Median displacement of the measured front points from the station's
-    /// flat-plate prediction, screen px (u, v); `null` when none was
-    /// measured.
-    pub median_displacement_px: Option<[f64; 2]>,
-    /// The same for the back, where measured.
-    pub median_back_displacement_px: Option<[f64; 2]>,
-    /// The spread the surfaces and the station may cause, screen px.
-    pub allowed_px: f64,
-    /// Surface departure behind `allowed_px`, nm RMS defocus.
-    pub max_departure_nm: f64,
-    /// Pixels flagged far from the prediction.
-    pub far_pixels: usize,
-    /// Pixels flagged with a residual far above the noise.
-    pub poor_fit_pixels: usize,
-    /// The schedule's shortest alias spacing (the nearest false maximum of
-    /// its ambiguity function over the screen, any direction), screen px;
-    /// `null` when no direction has one on the screen.
-    pub alias_spacing_px: Option<f64>,
-    /// In words.
-    pub note: String,
-}
 
 /// What the quality pass takes.
 #[derive(Debug, Clone, Copy)]

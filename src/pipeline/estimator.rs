@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::optics::station::Station;
 use crate::report::summary::Summary;
-use crate::solve::direct::{self, DirectOptions, Iteration};
+use crate::solve::direct::{self, DirectOptions, DirectReport};
 use crate::solve::spectral::{SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
@@ -20,7 +20,7 @@ use crate::solve::surfaces::{
 #[serde(rename_all = "kebab-case")]
 pub enum Estimator {
     /// The surface-domain fit where the reflections are closer than
-    /// [`DIRECT_BELOW_BINS`] (median over the pixels) or the per-pixel route
+    /// [`direct::DIRECT_BELOW_BINS`] (median over the pixels) or the per-pixel route
     /// measures nothing, started from the per-pixel surfaces where those
     /// exist; the per-pixel route elsewhere, and where the schedule is one
     /// the surface-domain fit does not model (phase shifting).
@@ -30,51 +30,6 @@ pub enum Estimator {
     PerPixel,
     /// The surface-domain fit; an error where it cannot run.
     Direct,
-}
-
-/// Median front–back separation (Fourier bins) below which `auto` fits the
-/// surfaces to the frames. Measured (`mfd bench thin`, 48×48 bench, paper
-/// schedule, 5 % noise, 3 seeds; docs/figures.md): at 0.43–0.45 bins the
-/// per-pixel route's front is 1.4–2.0× its bound, the surface-domain fit's
-/// 0.83–0.84×; at 0.89–2.75 bins the per-pixel route is at 0.93–1.09× and
-/// the surface-domain fit at 1.12–1.21× (its weights follow each pixel's
-/// own amplitudes and noise, which the per-pixel route smooths); 0.58 bins
-/// (10 mm, n = 2.2): both at 1.1×. Between those, 0.75.
-pub const DIRECT_BELOW_BINS: f64 = 0.75;
-
-/// Whether the reflections, `median_bins` apart
-/// ([`direct::median_separation_bins`]), are close enough for `auto` to fit
-/// the surfaces to the frames: the one rule `auto` and `mfd plan` (which
-/// bound a schedule is predicted with) share. False for NaN (no pixel sees
-/// two reflections).
-pub fn surface_domain_preferred(median_bins: f64) -> bool {
-    median_bins < DIRECT_BELOW_BINS
-}
-
-/// What the surface-domain fit did, for `summary.json` and the maps.
-#[derive(Debug, Clone)]
-pub struct DirectReport {
-    /// Its iterations.
-    pub iterations: Vec<Iteration>,
-    /// Whether it converged.
-    pub converged: bool,
-    /// Pixels fitted with two reflections.
-    pub two_reflection_pixels: usize,
-    /// The fitted pixels' clipped samples (fitted at their conditional means).
-    pub clipped: direct::Clipped,
-    /// The third reflection's factor and σ, where the frames showed it.
-    pub third_reflection: Option<direct::ThirdReflection>,
-    /// Wall time, s.
-    pub seconds: f64,
-    /// Camera width, pixels (the maps' row length).
-    pub width: usize,
-    /// `[rows, columns, 2, 2]`: S1, S2 the fitted surfaces predict.
-    pub predicted: Vec<f64>,
-    /// `[rows, columns]`: each pixel's χ² against that prediction.
-    pub chi2_map: Vec<f64>,
-    /// What the per-pixel route gave, for comparison: its error message
-    /// when it measured nothing.
-    pub per_pixel_failed: Option<String>,
 }
 
 /// The surfaces from the spectral stage's `solver` and `maps` with the
@@ -95,7 +50,7 @@ pub fn surfaces_from_frames(
     let cov = maps.screen_cov();
     let obs = Observations::from_maps(station, &maps.screen_coords(), Uncertainty::Cov(&cov))?;
     let per_pixel = solve_surfaces(&obs, station, opts);
-    let close = surface_domain_preferred(direct::median_separation_bins(solver));
+    let close = direct::surface_domain_preferred(direct::median_separation_bins(solver));
     let wanted = match estimator {
         Estimator::PerPixel => false,
         Estimator::Direct => true,

@@ -11,10 +11,10 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::PipelineError;
+pub use crate::report::records::{InputFile, Inputs};
 
 /// The file every result folder holds: the inputs it was made from.
 pub const INPUTS_FILE: &str = "inputs.json";
@@ -28,15 +28,6 @@ pub const RESULT_MARKERS: [&str; 4] = [
     "surfaces.json",
 ];
 
-/// One input file, by path and content.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct InputFile {
-    /// The path as given.
-    pub path: String,
-    /// SHA-256 of the file's bytes, lower-case hex.
-    pub sha256: String,
-}
-
 impl InputFile {
     /// `path` with the digest of its bytes.
     ///
@@ -47,50 +38,6 @@ impl InputFile {
             path: path.display().to_string(),
             sha256: sha256_file(path)?,
         })
-    }
-}
-
-/// What a result was made from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Inputs {
-    /// The acquisition folder; the digest is its manifest's (which lists
-    /// every frame), beside the number of frames read.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub acquisition: Option<InputFile>,
-    /// Frames read from the acquisition.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub frames: Option<usize>,
-    /// The screen points the surface stage started from (`--screen-coords`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub screen_coords: Option<InputFile>,
-    /// The station file.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub station: Option<InputFile>,
-    /// The station's uncertainty file, when one was used.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub uncertainty: Option<InputFile>,
-    /// The mfd version that made the result.
-    pub mfd_version: String,
-}
-
-impl Default for Inputs {
-    /// No inputs named yet, this version of mfd.
-    fn default() -> Inputs {
-        Inputs {
-            acquisition: None,
-            frames: None,
-            screen_coords: None,
-            station: None,
-            uncertainty: None,
-            mfd_version: env!("CARGO_PKG_VERSION").into(),
-        }
-    }
-}
-
-impl Inputs {
-    /// No inputs named yet, this version of mfd.
-    pub fn new() -> Inputs {
-        Inputs::default()
     }
 }
 

@@ -44,7 +44,7 @@ pub enum BoundKind {
     /// parameters free, however close the reflections) through the surface
     /// solver's normal equations, as `budget::scene` and `mfd bench thin`
     /// compute it. Used where the reflections are closer than
-    /// `--estimator auto`'s rule ([`crate::pipeline::surface_domain_preferred`]),
+    /// `--estimator auto`'s rule ([`crate::solve::direct::surface_domain_preferred`]),
     /// i.e. where `auto` will fit the surfaces to the frames.
     SurfaceDomain,
 }
@@ -61,7 +61,7 @@ pub fn bound_kind(design: &Design, view: &TracedView, opts: &PlanOptions) -> (Bo
         view,
         candidates.iter().map(|&c| c as usize),
     );
-    let kind = if crate::pipeline::surface_domain_preferred(bins) {
+    let kind = if crate::solve::direct::surface_domain_preferred(bins) {
         BoundKind::SurfaceDomain
     } else {
         BoundKind::PerPixel

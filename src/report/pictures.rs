@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::plot::{
+use crate::plot::{
     coefficient_chart_png, height_map, line_plot_png, Extent, Format, HeightMap, Panel, PlotError,
     Series,
 };

@@ -84,10 +84,10 @@ pub struct Summary {
     pub withheld: [Option<String>; 2],
     /// What the result was made from (paths and SHA-256 digests).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub inputs: Option<crate::pipeline::Inputs>,
+    pub inputs: Option<crate::report::records::Inputs>,
     /// The spectral stage's points checked against the station.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub consistency: Option<crate::pipeline::Consistency>,
+    pub consistency: Option<crate::report::records::Consistency>,
 }
 
 fn per_pixel() -> String {
@@ -356,7 +356,7 @@ impl Summary {
     }
 
     /// The summary of a solution the surface-domain fit made.
-    pub fn with_direct(mut self, d: &crate::pipeline::DirectReport) -> Summary {
+    pub fn with_direct(mut self, d: &crate::solve::direct::DirectReport) -> Summary {
         self.estimator = "surface-domain".into();
         self.direct = Some(DirectSummary {
             note: DIRECT_NOTE.into(),

@@ -4,7 +4,7 @@
 //! loopback.
 //!
 //! The Aravis plumbing (the fake camera, its fill callback, the client) is
-//! `acquire::camera::aravis_fake` (feature `aravis`); this part needs no
+//! [`crate::sim::aravis_fake`] (feature `aravis`); this part needs no
 //! Aravis and renders with a [`SimulatedCamera`] looking at its
 //! [`ScreenState`], or with a [`SpotCamera`] looking at a point target.
 

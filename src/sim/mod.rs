@@ -10,18 +10,18 @@
 //! acquisition folder with its truth.
 //!
 //! Arrows point down: this module uses `acquire` (the camera trait, the
-//! displays, patterns, the acquisition writer) and `optics`; `acquire`
-//! reaches back only where `--camera sim` and `aravis:fake` are selected
-//! (`acquire::camera::open` and `acquire::camera::aravis_fake`).
+//! displays, patterns, the acquisition writer), `optics`, `formats` and
+//! `kernels`, nothing above them; `acquire` uses nothing of it. The
+//! simulated cameras are chosen by `--camera sim` and `aravis:fake` in
+//! `live::camera::open`, above both.
 
 mod camera;
 mod gige_feed;
 mod phase;
 mod render;
-mod scene;
 mod screen;
-pub mod session;
-pub mod session_flat;
+#[cfg(feature = "aravis")]
+pub mod aravis_fake;
 mod target;
 
 use std::path::{Path, PathBuf};
@@ -31,7 +31,7 @@ pub use camera::{SimFaults, SimulatedCamera};
 pub use gige_feed::{Filled, GigeFeed};
 pub use phase::{phase_shift_patterns, Luminance, PhaseShiftParams, PhaseShiftRenderer};
 pub use render::{Falloff, Renderer, SimParams};
-pub use scene::RandomSurfaceSpec;
+pub use crate::optics::zernike::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
 pub use target::{render_spot, SpotCamera, SpotScene};
 

@@ -1,5 +1,5 @@
-//! Helpers of the spectral tests (`tests/spectral_sim.rs`,
-//! `tests/spectral_engines.rs`): simulated acquisitions of the bench
+//! Helpers of the spectral tests (`tests/it/spectral_sim.rs`,
+//! `tests/it/spectral_engines.rs`): simulated acquisitions of the bench
 //! station streamed through the solver, and their scores against the truth.
 
 use mfd::acquire::acquisition::FrameInfo;

@@ -11,15 +11,12 @@
 //!
 //! Backends are chosen by a [`CameraSpec`] string (`sim`, `aravis`,
 //! `aravis:ID`, `aravis:fake`, `v4l:/dev/videoN`); one that was not compiled
-//! in answers [`CameraError::NotBuilt`] naming its feature. This file is the
-//! only place that looks at those features. [`open`] (for `sim`) and
-//! `aravis_fake` (for `aravis:fake`) are the only places in `acquire` that
-//! use the simulated station.
+//! in answers [`CameraError::NotBuilt`] naming its feature. Opening the camera
+//! a spec names is `live::camera::open`, above the simulated station (which
+//! serves `sim` and `aravis:fake`); `acquire` uses nothing of `sim`.
 
 #[cfg(feature = "aravis")]
 pub mod aravis;
-#[cfg(feature = "aravis")]
-pub mod aravis_fake;
 pub mod convert;
 mod error;
 #[cfg(feature = "v4l")]
@@ -29,8 +26,6 @@ use std::str::FromStr;
 use std::time::{Duration, Instant};
 
 pub use error::CameraError;
-// The `--camera sim` selection point (see `open`).
-use crate::sim::{SimulatedCamera, SpotCamera};
 
 /// Pixel formats the backends deliver (all stored as `u16` counts).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -258,66 +253,6 @@ impl CameraSpec {
     }
 }
 
-/// Opens the camera `spec` names. `sim` is the simulated camera, used for
-/// [`CameraSpec::Sim`] and served by the Aravis fake camera for
-/// `aravis:fake`; real devices ignore it.
-///
-/// # Errors
-/// [`CameraError::NotBuilt`] when the backend's feature is off;
-/// [`CameraError::BadSpec`] when a simulated camera is needed and none was
-/// given; device errors.
-pub fn open(
-    spec: &CameraSpec,
-    sim: Option<SimulatedCamera>,
-) -> Result<Box<dyn Camera>, CameraError> {
-    let need_sim = || CameraError::BadSpec {
-        spec: format!("{spec:?}"),
-        problem: "a simulated station is needed (give --sim-surfaces or a station)".into(),
-    };
-    match spec {
-        CameraSpec::Sim => Ok(Box::new(sim.ok_or_else(need_sim)?)),
-        #[cfg(feature = "aravis")]
-        CameraSpec::Aravis(Some(id)) if id == "fake" => {
-            let sim = sim.ok_or_else(need_sim)?;
-            Ok(Box::new(aravis_fake::FakeStation::start(sim)?))
-        }
-        #[cfg(feature = "aravis")]
-        CameraSpec::Aravis(id) => Ok(Box::new(aravis::AravisCamera::open(id.as_deref())?)),
-        #[cfg(not(feature = "aravis"))]
-        CameraSpec::Aravis(_) => Err(CameraError::NotBuilt {
-            backend: "aravis".into(),
-            feature: "aravis",
-        }),
-        #[cfg(feature = "v4l")]
-        CameraSpec::V4l(dev) => Ok(Box::new(v4l::V4lCamera::open(dev)?)),
-        #[cfg(not(feature = "v4l"))]
-        CameraSpec::V4l(_) => Err(CameraError::NotBuilt {
-            backend: "v4l".into(),
-            feature: "v4l",
-        }),
-    }
-}
-
-/// Opens the camera `spec` names for a calibration target: `sim` is
-/// `target` itself, `aravis:fake` serves `target`'s frames over GigE Vision
-/// on loopback, real devices ignore it.
-///
-/// # Errors
-/// As [`open`].
-pub fn open_for_target(
-    spec: &CameraSpec,
-    target: SpotCamera,
-) -> Result<Box<dyn Camera>, CameraError> {
-    match spec {
-        CameraSpec::Sim => Ok(Box::new(target)),
-        #[cfg(feature = "aravis")]
-        CameraSpec::Aravis(Some(id)) if id == "fake" => {
-            Ok(Box::new(aravis_fake::FakeStation::start_target(target)?))
-        }
-        real => open(real, None),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -343,26 +278,5 @@ mod tests {
         }
         assert!("aravis:fake".parse::<CameraSpec>().unwrap().is_simulated());
         assert!(!"aravis:X".parse::<CameraSpec>().unwrap().is_simulated());
-    }
-
-    #[cfg(not(feature = "v4l"))]
-    #[test]
-    fn a_backend_not_built_names_its_feature() {
-        let err = match open(&CameraSpec::V4l("/dev/video0".into()), None) {
-            Err(e) => e,
-            Ok(_) => panic!("v4l opened without the feature"),
-        };
-        assert!(matches!(err, CameraError::NotBuilt { feature: "v4l", .. }));
-        assert!(err.to_string().contains("--features v4l"), "{err}");
-    }
-
-    #[cfg(not(feature = "aravis"))]
-    #[test]
-    fn aravis_not_built_names_its_feature() {
-        let err = match open(&CameraSpec::Aravis(None), None) {
-            Err(e) => e,
-            Ok(_) => panic!("aravis opened without the feature"),
-        };
-        assert!(err.to_string().contains("--features aravis"), "{err}");
     }
 }

@@ -22,7 +22,7 @@ pub struct CameraProfile {
     /// Vendor and model.
     pub model: String,
     /// Sensor `[width, height]` in pixels.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub resolution: [u32; 2],
     /// Pixel pitch, µm.
     pub pixel_pitch_um: f64,
@@ -44,7 +44,7 @@ pub struct DisplayProfile {
     /// Vendor and model.
     pub model: String,
     /// Panel `[width, height]` in pixels.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub resolution: [u32; 2],
     /// Pixel pitch, mm.
     pub pixel_pitch_mm: f64,
@@ -205,17 +205,7 @@ pub fn bench_station(
         bit_depth: 16,
         distortion: None,
     };
-    let display = DisplayProfile {
-        format: "mfd-display-profile/1".into(),
-        model: "paper LCD".into(),
-        resolution: [1600, 1200],
-        pixel_pitch_mm: 0.27,
-        diagonal_in: 21.3,
-        gamma: 2.2,
-        settle_ms: 30.0,
-        cover_glass: None,
-        response: None,
-    };
+    let display = DisplayProfile::paper_lcd();
     let element = Element {
         refractive_index: index,
         thickness_mm,
@@ -229,6 +219,24 @@ pub fn bench_station(
         element,
     };
     layout.build(&camera, &display)
+}
+
+impl DisplayProfile {
+    /// The paper's LCD: 1600 × 1200 pixels of 0.27 mm (21.3 in), gamma 2.2,
+    /// 30 ms to settle, no cover glass, no measured response.
+    pub fn paper_lcd() -> DisplayProfile {
+        DisplayProfile {
+            format: "mfd-display-profile/1".into(),
+            model: "paper LCD".into(),
+            resolution: [1600, 1200],
+            pixel_pitch_mm: 0.27,
+            diagonal_in: 21.3,
+            gamma: 2.2,
+            settle_ms: 30.0,
+            cover_glass: None,
+            response: None,
+        }
+    }
 }
 
 impl SymmetricLayout {

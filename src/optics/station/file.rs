@@ -30,23 +30,23 @@ pub struct StationFile {
 #[serde(deny_unknown_fields)]
 pub struct CameraFile {
     /// Projection centre C in the world frame, mm.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub position_mm: [f64; 3],
     /// Camera-to-world rotation, row-major; columns are the camera's x (column
     /// i), y (row j) and optical axes in world coordinates.
-    #[serde(deserialize_with = "crate::formats::exact::matrix3")]
+    #[serde(deserialize_with = "crate::conventions::exact::matrix3")]
     pub rotation: [[f64; 3]; 3],
     /// Focal length, mm.
     pub focal_length_mm: f64,
     /// Pixel pitch, µm.
     pub pixel_pitch_um: f64,
     /// `[width, height]` in pixels.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub resolution: [u32; 2],
     /// Principal point `[cx, cy]` in pixels; default `[width/2, height/2]`.
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub principal_point_px: Option<[f64; 2]>,
@@ -64,14 +64,14 @@ pub struct DistortionFile {
     /// Radial k1, k2, k3; absent: zero.
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub k: Option<[f64; 3]>,
     /// Tangential p1, p2; absent: zero.
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub p: Option<[f64; 2]>,
@@ -92,18 +92,18 @@ pub struct CoverGlassFile {
 #[serde(deny_unknown_fields)]
 pub struct ScreenFile {
     /// `[width, height]` in screen pixels.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub resolution: [u32; 2],
     /// Screen pixel pitch, mm.
     pub pixel_pitch_mm: f64,
     /// World position of `(u, v) = (0, 0)`, mm.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub origin_mm: [f64; 3],
     /// Unit vector of increasing u, world frame.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub u_axis: [f64; 3],
     /// Unit vector of increasing v, world frame.
-    #[serde(deserialize_with = "crate::formats::exact::array")]
+    #[serde(deserialize_with = "crate::conventions::exact::array")]
     pub v_axis: [f64; 3],
     /// `[screen.cover_glass]` (version 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -123,21 +123,21 @@ pub struct ElementFile {
     /// Centre of that region `[x, y]`, mm; default `[0, 0]`.
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub aperture_center_mm: Option<[f64; 2]>,
     /// Where the element's frame sits, world frame, mm (version 2).
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub offset_mm: Option<[f64; 3]>,
     /// Rotation about world x, then world y, degrees (version 2).
     #[serde(
         default,
-        deserialize_with = "crate::formats::exact::option_array",
+        deserialize_with = "crate::conventions::exact::option_array",
         skip_serializing_if = "Option::is_none"
     )]
     pub tilt_deg: Option<[f64; 2]>,

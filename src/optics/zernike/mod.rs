@@ -49,6 +49,7 @@ mod fit;
 mod indices;
 mod qr;
 mod radial;
+mod random;
 mod surface;
 
 #[cfg(test)]
@@ -61,6 +62,7 @@ mod tests_fit;
 mod tests_gradient;
 
 pub use basis::ZernikeBasis;
+pub use random::RandomSurfaceSpec;
 pub use error::ZernikeError;
 pub use fit::{fit_heights, fit_slopes, ZernikeFit};
 pub use indices::{nm_to_noll, noll_to_nm, terms_up_to_order};

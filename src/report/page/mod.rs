@@ -7,7 +7,7 @@
 //! It reads what `pipeline::Reconstruction::write` put in the folder
 //! (`summary.json`, `surfaces.json`, the pictures, the spectral arrays) and
 //! draws what is not there as a picture (the quality maps) with
-//! [`crate::report::plot`].
+//! [`crate::plot`].
 
 mod context;
 pub mod html;
@@ -69,7 +69,7 @@ pub enum ReportError {
     Surfaces(#[from] crate::formats::surfaces_file::SurfacesFileError),
     /// A picture could not be drawn.
     #[error(transparent)]
-    Plot(#[from] crate::report::plot::PlotError),
+    Plot(#[from] crate::plot::PlotError),
     /// The acquisition could not be opened.
     #[error(transparent)]
     Acquisition(#[from] crate::acquire::acquisition::AcquisitionError),

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use super::ReportError;
 use crate::formats::npy;
-use crate::report::plot::height_map_png;
+use crate::plot::height_map_png;
 use crate::solve::spectral::PixelFlags;
 
 /// Pixels with data, and per flag (its meaning) the pixels that have it.

@@ -27,9 +27,15 @@
 //! leaves through the edge there) are left out.
 
 pub mod pixel;
+mod report;
 pub mod run;
+mod separation;
 
+pub use separation::{
+    median_separation_bins, median_separation_bins_of, surface_domain_preferred, DIRECT_BELOW_BINS,
+};
+pub use report::DirectReport;
 pub use run::{
-    median_separation_bins, median_separation_bins_of, solve, Clipped, DirectError, DirectOptions,
+    solve, Clipped, DirectError, DirectOptions,
     DirectSolution, Iteration, ThirdReflection,
 };

@@ -555,60 +555,6 @@ fn fit(
     })
 }
 
-/// Median over the pixels that see both reflections of their predicted
-/// front–back separation in Fourier bins, over the schedule's τ span, from
-/// the flat plate the station describes; NaN where no pixel sees both.
-///
-/// A pixel's separation is that of its best pair of non-parallel
-/// directions, the smaller of the two: the per-pixel fit is joint over the
-/// directions, and two that each see the reflections apart fix both
-/// points in the plane, while a direction along which they coincide adds
-/// only their blend. With the two diagonals alone it is the smaller of
-/// their two; with the plain directions too, a pixel whose reflections
-/// lie along a plain axis is separated by the other plain one and the
-/// diagonals.
-pub fn median_separation_bins(solver: &SpectralSolver) -> f64 {
-    median_separation_bins_of(
-        solver.design(),
-        solver.prior(),
-        solver.candidates().iter().map(|&c| c as usize),
-    )
-}
-
-/// [`median_separation_bins`] of a schedule's `design` over the `pixels`
-/// of a traced `prior` (the planner's view of a schedule not yet
-/// acquired): one computation, so that `mfd plan` and `--estimator auto`
-/// decide alike.
-pub fn median_separation_bins_of(
-    design: &crate::solve::spectral::model::Design,
-    prior: &crate::optics::trace::TracedView,
-    pixels: impl Iterator<Item = usize>,
-) -> f64 {
-    let (lo, hi) = design
-        .frames
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), f| {
-            (l.min(f.tau), h.max(f.tau))
-        });
-    let span = hi - lo;
-    let mut seps: Vec<f64> = pixels
-        .filter_map(|c| {
-            let p = &prior.pixels[c];
-            let (f, b) = (p.front.as_ref().ok()?, p.back.as_ref().ok()?);
-            let along = |ax: &crate::solve::spectral::model::Axis| {
-                (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * span
-            };
-            let seps: Vec<f64> = design.axes.iter().map(along).collect();
-            design.pair_separation(&seps)
-        })
-        .collect();
-    if seps.is_empty() {
-        return f64::NAN;
-    }
-    let mid = seps.len() / 2;
-    *seps.select_nth_unstable_by(mid, f64::total_cmp).1
-}
-
 /// The start: the per-pixel surfaces, or flat ones with the starting term
 /// count of the surface solver.
 fn start_plate(

@@ -3,7 +3,7 @@
 use super::*;
 use crate::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use crate::optics::zernike::ZernikeSurface;
-use crate::sim::RandomSurfaceSpec;
+use crate::optics::zernike::RandomSurfaceSpec;
 use crate::solve::surfaces::observe::diagonal;
 
 fn station() -> Station {

@@ -11,7 +11,7 @@
 //! rather than linearising the normal equations keeps the stages'
 //! nonlinearity (the front's reflection points, the back's paths) exact;
 //! a one-σ step is the budget's own scale, so the linear propagation it
-//! feeds is tested where it is used (`tests/station_v2.rs`).
+//! feeds is tested where it is used (`tests/it/station_v2.rs`).
 
 use nalgebra::{DMatrix, Unit};
 

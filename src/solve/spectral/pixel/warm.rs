@@ -90,7 +90,7 @@ pub(super) const WARM_AMPLITUDE_SIGMAS: f64 = 10.0;
 /// The warm pair's second Gauss–Newton step is taken without evaluating
 /// its end point where it is predicted to lower χ² by less than this: a
 /// step of ≤ √0.1 ≈ 0.3σ, which lands to second order in it (the points
-/// within 0.03σ of the searched fit's, `tests/spectral_sim.rs`); RSS is
+/// within 0.03σ of the searched fit's, `tests/it/spectral_sim.rs`); RSS is
 /// then the predicted one and JᵀJ the start's, whose σ differs by ≤ 0.7 %
 /// there (2 % for steps up to 1σ, hence not more).
 pub(super) const ONE_STEP_CHI2: f64 = 0.1;
