@@ -21,8 +21,8 @@ use crate::formats::surfaces_file::{
     SurfaceCoefficients, SurfaceEntry, SurfacesFile, SurfacesFileError, ZernikeSpec,
 };
 use crate::optics::station::{Dof, Station, StationUncertainty, UncertaintyError};
-use crate::report::pictures;
 use crate::plot::PlotError;
+use crate::report::pictures;
 use crate::report::summary::Summary;
 use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::report::height_grid;
@@ -36,8 +36,8 @@ mod estimator;
 pub mod result_dir;
 mod station_uncertainty;
 
-pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
 pub use crate::solve::direct::DirectReport;
+pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
 pub use estimator::{surfaces_from_frames, withheld, Estimator};
 pub use result_dir::{InputFile, Inputs, Staged};
 

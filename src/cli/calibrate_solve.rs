@@ -8,8 +8,8 @@ use anyhow::Context;
 use clap::Args;
 
 use mfd::calibrate::from_session::solve_session;
-use mfd::calibrate::simulate::{example_truth, simulate_session, write_session, SessionSpec};
 use mfd::calibrate::simulate::flat::write_flat_acquisition;
+use mfd::calibrate::simulate::{example_truth, simulate_session, write_session, SessionSpec};
 use mfd::sim::PhaseShiftParams;
 
 /// Arguments of `mfd calibrate solve`.

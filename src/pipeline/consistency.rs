@@ -26,7 +26,6 @@
 //!
 //! Written by hand: it is a few robust statistics over the maps.
 
-
 use crate::acquire::patterns::FringeAxis;
 use crate::optics::station::Station;
 use crate::optics::trace::TracedView;

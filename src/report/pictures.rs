@@ -5,12 +5,12 @@
 
 use std::path::{Path, PathBuf};
 
+use super::summary::Summary;
+use crate::optics::zernike::ZernikeSurface;
 use crate::plot::{
     coefficient_chart_png, height_map, line_plot_png, Extent, Format, HeightMap, Panel, PlotError,
     Series,
 };
-use super::summary::Summary;
-use crate::optics::zernike::ZernikeSurface;
 use crate::solve::surfaces::report::{SurfaceFigures, REMOVED_TERMS};
 
 /// The breakdown chart's last Noll term (radial order 7; beyond it the

@@ -15,23 +15,23 @@
 //! simulated cameras are chosen by `--camera sim` and `aravis:fake` in
 //! `live::camera::open`, above both.
 
+#[cfg(feature = "aravis")]
+pub mod aravis_fake;
 mod camera;
 mod gige_feed;
 mod phase;
 mod render;
 mod screen;
-#[cfg(feature = "aravis")]
-pub mod aravis_fake;
 mod target;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+pub use crate::optics::zernike::RandomSurfaceSpec;
 pub use camera::{SimFaults, SimulatedCamera};
 pub use gige_feed::{Filled, GigeFeed};
 pub use phase::{phase_shift_patterns, Luminance, PhaseShiftParams, PhaseShiftRenderer};
 pub use render::{Falloff, Renderer, SimParams};
-pub use crate::optics::zernike::RandomSurfaceSpec;
 pub use screen::{MirroredDisplay, ScreenState, SimDisplay};
 pub use target::{render_spot, SpotCamera, SpotScene};
 

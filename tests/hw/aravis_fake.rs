@@ -12,7 +12,6 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use mfd::acquire::acquisition::Acquisition;
-use mfd::sim::aravis_fake::FakeStation;
 use mfd::acquire::camera::{Camera, CameraConfig, StreamStatistics, TriggerMode};
 use mfd::acquire::patterns::Schedule;
 use mfd::calibrate::centroid::centroid_of_file;
@@ -23,6 +22,7 @@ use mfd::live::{acquire, Counters, FrameSink, Recorder, SequencerConfig, Session
 use mfd::optics::station::Station;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
+use mfd::sim::aravis_fake::FakeStation;
 use mfd::sim::{
     MirroredDisplay, Renderer, ScreenState, SimDisplay, SimFaults, SimParams, SimulatedCamera,
 };

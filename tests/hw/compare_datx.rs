@@ -7,7 +7,6 @@
 //! limits it).
 #![cfg(feature = "datx")]
 
-
 use crate::compare_support::*;
 use mfd::compare::{self, LoadOptions, RegistrationOptions};
 use mfd::formats::surfaces_file::SurfacesFile;

@@ -2,7 +2,6 @@
 //! the files it writes, the JSON's fields and their lengths, and the error
 //! messages on bad input (each naming the flag or the file and field).
 
-
 use std::path::Path;
 
 use crate::common::{mfd, public_small};

@@ -7,10 +7,10 @@
 use mfd::calibrate::calibration::{calibrate, Calibration};
 use mfd::calibrate::error::CalibrationError;
 use mfd::calibrate::params::{difference, Param, State};
-use mfd::optics::station::Station;
 use mfd::calibrate::simulate::{
     example_truth, flat_truth, simulate_session, SessionSpec, SimulatedSession,
 };
+use mfd::optics::station::Station;
 use nalgebra::{DMatrix, DVector};
 
 fn session(seed: u64, spec: SessionSpec) -> SimulatedSession {

@@ -5,9 +5,9 @@
 //! geometry with the spectral stage's 5 % noise.
 
 use mfd::calibrate::calibration::calibrate;
+use mfd::calibrate::simulate::{example_truth, simulate_session, SessionSpec};
 use mfd::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use mfd::optics::zernike::ZernikeSurface;
-use mfd::calibrate::simulate::{example_truth, simulate_session, SessionSpec};
 use mfd::sim::RandomSurfaceSpec;
 use mfd::solve::surfaces::station_error::station_induced;
 use mfd::solve::surfaces::{reconstruct, Observations, SurfaceOptions, Uncertainty};

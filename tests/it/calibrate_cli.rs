@@ -9,8 +9,8 @@ use crate::common;
 
 use std::path::Path;
 
-use mfd::optics::station::{Station, StationUncertainty};
 use mfd::calibrate::simulate::flat_truth;
+use mfd::optics::station::{Station, StationUncertainty};
 
 fn simulated_session(dir: &Path) -> String {
     let s = dir.join("session");

@@ -4,7 +4,6 @@
 //! 19: "every number that enters is checked where it enters"). Rules:
 //! `src/cli/check.rs`; table: docs/input-checks.md, "Command-line options".
 
-
 use crate::common::mfd;
 
 /// (command line, the option the error must name as the one whose value is

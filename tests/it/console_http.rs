@@ -12,8 +12,8 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use base64::Engine as _;
 use crate::console_support::{decode_png, get, request, BIT_DEPTH};
+use base64::Engine as _;
 use futures_util::StreamExt;
 use mfd::acquire::acquisition::Acquisition;
 use mfd::console::preview::{display_level, full_scale, SATURATED_RGB};

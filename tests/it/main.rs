@@ -16,6 +16,7 @@ mod console_support;
 mod report_support;
 
 mod acquisition_io;
+mod architecture;
 mod bench_json;
 mod budget_cli;
 mod budget_fisher;

@@ -3,7 +3,6 @@
 //! the file, and `mfd simulate --schedule` and `mfd measure --schedule`
 //! (simulated camera, offscreen display) showing exactly that sequence.
 
-
 use crate::common::{mfd, public_small};
 
 #[test]

@@ -3,7 +3,6 @@
 //! series' answers and flags what leaves its band, warm starts give the
 //! searched answers, and a prior handed in is the one the solver traces.
 
-
 use crate::common::spectral::*;
 use mfd::acquire::acquisition::FrameInfo;
 use mfd::acquire::patterns::Schedule;

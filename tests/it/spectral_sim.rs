@@ -2,7 +2,6 @@
 //! noise-free data, at the Cramér–Rao bound with noise, honest about what it
 //! cannot separate, and never a swapped front and back.
 
-
 use crate::common::spectral::*;
 use mfd::optics::trace::{Plate, TracedView};
 use mfd::sim::{RandomSurfaceSpec, Renderer, SimParams};

@@ -3,7 +3,6 @@
 //! actual error of plates traced on stations drawn from that uncertainty
 //! and reconstructed on the nominal one.
 
-
 use std::path::Path;
 
 use mfd::optics::station::{bench_station, Dof, Station, StationUncertainty};

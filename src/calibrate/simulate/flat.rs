@@ -5,14 +5,14 @@
 
 use std::path::Path;
 
-use crate::sim::{
-    phase_shift_patterns, simulate_mirror, PhaseShiftParams, SimError, SimParams, Simulation,
-};
 use crate::acquire::acquisition::FrameLayout;
 use crate::formats::surfaces_file::SurfacesFile;
 use crate::optics::station::Station;
 use crate::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use crate::optics::zernike::ZernikeSurface;
+use crate::sim::{
+    phase_shift_patterns, simulate_mirror, PhaseShiftParams, SimError, SimParams, Simulation,
+};
 
 /// The schedule: τ = 1, 4, 16, 64 × four phase steps × ±45° (32 frames).
 pub fn flat_schedule() -> Vec<crate::acquire::patterns::Pattern> {

@@ -62,11 +62,11 @@ mod tests_fit;
 mod tests_gradient;
 
 pub use basis::ZernikeBasis;
-pub use random::RandomSurfaceSpec;
 pub use error::ZernikeError;
 pub use fit::{fit_heights, fit_slopes, ZernikeFit};
 pub use indices::{nm_to_noll, noll_to_nm, terms_up_to_order};
 pub use radial::radial_polynomial;
+pub use random::RandomSurfaceSpec;
 pub use surface::ZernikeSurface;
 
 /// Highest radial order a basis may hold (recurrence verified to n = 100).

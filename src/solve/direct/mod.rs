@@ -31,11 +31,10 @@ mod report;
 pub mod run;
 mod separation;
 
-pub use separation::{
-    median_separation_bins, median_separation_bins_of, surface_domain_preferred, DIRECT_BELOW_BINS,
-};
 pub use report::DirectReport;
 pub use run::{
-    solve, Clipped, DirectError, DirectOptions,
-    DirectSolution, Iteration, ThirdReflection,
+    solve, Clipped, DirectError, DirectOptions, DirectSolution, Iteration, ThirdReflection,
+};
+pub use separation::{
+    median_separation_bins, median_separation_bins_of, surface_domain_preferred, DIRECT_BELOW_BINS,
 };

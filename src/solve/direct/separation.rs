@@ -67,9 +67,7 @@ pub fn median_separation_bins_of(
         .filter_map(|c| {
             let p = &prior.pixels[c];
             let (f, b) = (p.front.as_ref().ok()?, p.back.as_ref().ok()?);
-            let along = |ax: &Axis| {
-                (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * span
-            };
+            let along = |ax: &Axis| (ax.a * (b.u - f.u) + ax.b * (b.v - f.v)).abs() * span;
             let seps: Vec<f64> = design.axes.iter().map(along).collect();
             design.pair_separation(&seps)
         })

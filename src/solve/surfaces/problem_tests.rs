@@ -2,8 +2,8 @@
 
 use super::*;
 use crate::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
-use crate::optics::zernike::ZernikeSurface;
 use crate::optics::zernike::RandomSurfaceSpec;
+use crate::optics::zernike::ZernikeSurface;
 use crate::solve::surfaces::observe::diagonal;
 
 fn station() -> Station {
