@@ -8,7 +8,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, Subcommand};
 
-use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
+use mfd::acquire::camera::{CameraConfig, CameraSpec, PixelFormat};
 use mfd::calibrate::check::{check, Severity};
 use mfd::calibrate::frame::WorldFrame;
 use mfd::calibrate::make::{self, PlannedTarget};

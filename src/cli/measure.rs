@@ -11,7 +11,7 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use mfd::acquire::camera::{self, CameraConfig, CameraSpec, PixelFormat};
+use mfd::acquire::camera::{CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
 use mfd::live::{sha256_hex, Counters, Measurement, Prepared, Report, SequencerConfig, Start};
 use mfd::optics::station::{Dof, Station};

@@ -8,7 +8,6 @@
 //! 83-pixel-radius disk (within 1 % of 1, i.e. 0.05 nm of 5 nm).
 
 use crate::common;
-use crate::compare_support;
 
 use crate::compare_support::*;
 use mfd::compare::{self, LoadOptions, RegistrationOptions};

@@ -1,7 +1,7 @@
 //! Tests of the simulated sessions.
 
 use super::*;
-use crate::calibrate::session_file::SessionFile;
+use crate::calibrate::session_file::{SessionFile, SESSION_FORMAT};
 use crate::formats::image_io::read_gray;
 
 #[test]
