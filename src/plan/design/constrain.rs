@@ -5,9 +5,11 @@
 use crate::acquire::acquisition::FrameInfo;
 use crate::budget::scene;
 use crate::optics::station::Station;
+use crate::solve::spectral::model::Design;
 
 use super::super::converge;
 use super::super::predict::{bound_kind, predict, run_stage, sample_pixels, separation, BoundKind};
+use super::super::stage::StageCheck;
 use super::super::{invalid, PlanError};
 use super::problem::{round, weights_of, Problem};
 use super::{DesignOptions, Designed, Views};
@@ -50,34 +52,9 @@ fn admissible(
         &opts.plan,
     )?;
     if bound_kind(&design, &views.flat, &opts.plan).0 == BoundKind::SurfaceDomain {
-        // `auto` will fit the surfaces to the frames: what must hold is
-        // that fit's convergence from the flat plate, on the pixels it
-        // takes (those the stage detected fringes on); per-pixel
-        // separability is not needed.
-        let both = sample_pixels(&views.flat, super::super::predict::CONVERGENCE_PIXELS, true);
-        let c = converge::convergence(
-            station,
-            frames,
-            &converge::Scene {
-                design: &design,
-                flat: &views.flat,
-                bent: &views.bent,
-                pixels: &both,
-                gain: opts.plan.radiometry.gain(&views.flat),
-                radiometry: &opts.plan.radiometry,
-            },
-            views.spread_px,
-        );
-        let why = super::super::predict::surface_domain_unmeasurable(&c, &stage);
-        log::debug!(
-            "design candidate of {} frames: surface-domain basin {:?} px against the prior's {:.1} px, pixels {:.2}, no signal on {:.2}: {why:?}",
-            frames.len(),
-            c.directions.iter().map(|d| d.basin_px).collect::<Vec<_>>(),
-            views.spread_px,
-            c.pixel_fraction,
-            stage.no_signal_fraction,
-        );
-        return Ok(why.is_none());
+        return Ok(surface_domain_admissible(
+            station, frames, opts, views, &design, &stage,
+        ));
     }
     let gain = opts.plan.radiometry.gain(&views.flat);
     let both = sample_pixels(&views.flat, 64, true);
@@ -93,6 +70,47 @@ fn admissible(
         sep.as_ref().map(|s| s.separable_fraction)
     );
     Ok(sep.is_some_and(|s| s.separable))
+}
+
+/// Whether the surface-domain fit measures a rounded schedule of `design`:
+/// it converges from the flat plate, and the stage's run `stage` detected
+/// fringes on enough of its sample pixels.
+fn surface_domain_admissible(
+    station: &Station,
+    frames: &[FrameInfo],
+    opts: &DesignOptions,
+    views: &Views,
+    design: &Design,
+    stage: &StageCheck,
+) -> bool {
+    // `auto` will fit the surfaces to the frames: what must hold is
+    // that fit's convergence from the flat plate, on the pixels it
+    // takes (those the stage detected fringes on); per-pixel
+    // separability is not needed.
+    let both = sample_pixels(&views.flat, super::super::predict::CONVERGENCE_PIXELS, true);
+    let c = converge::convergence(
+        station,
+        frames,
+        &converge::Scene {
+            design,
+            flat: &views.flat,
+            bent: &views.bent,
+            pixels: &both,
+            gain: opts.plan.radiometry.gain(&views.flat),
+            radiometry: &opts.plan.radiometry,
+        },
+        views.spread_px,
+    );
+    let why = super::super::predict::surface_domain_unmeasurable(&c, stage);
+    log::debug!(
+        "design candidate of {} frames: surface-domain basin {:?} px against the prior's {:.1} px, pixels {:.2}, no signal on {:.2}: {why:?}",
+        frames.len(),
+        c.directions.iter().map(|d| d.basin_px).collect::<Vec<_>>(),
+        views.spread_px,
+        c.pixel_fraction,
+        stage.no_signal_fraction,
+    );
+    why.is_none()
 }
 
 /// One constrained design of the search: its criterion Φ, the start
