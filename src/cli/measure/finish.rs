@@ -20,24 +20,68 @@ pub(super) fn finish(
     served: Option<&super::super::serve::Served>,
 ) -> anyhow::Result<()> {
     if report.interrupted {
-        println!(
-            "interrupted: continue with `mfd measure ... --resume`, or reconstruct \
-             what is there with `mfd reconstruct {}`",
-            args.out.join("acquisition").display()
-        );
-        return Err(super::super::exit::classified(
-            super::super::exit::Class::Interrupted,
-            anyhow::anyhow!(
-                "interrupted by the operator: {} of {} frames recorded in {}",
-                measurement.recorded(),
-                report.counters.total,
-                measurement.dir().display()
-            ),
-        ));
+        return Err(interrupted(args, report, measurement));
     }
     let Some(solver) = measurement.solver_mut() else {
         return Ok(());
     };
+    let options = options(args, station)?;
+    let mut fitting = |done: usize, total: usize| {
+        if let Some(s) = served {
+            s.fitting(done, total);
+        }
+    };
+    let mut rec = pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut fitting)?;
+    if let Some(s) = rec.spectral.as_mut() {
+        s.read_s = acquire_s;
+        if let Some(served) = served {
+            served.console.set_spectral(mfd::console::Spectral::Done {
+                both_found: s.maps.found_both(),
+                pixels: s.fitted_pixels,
+            });
+        }
+    }
+    let result = args.out.join("result");
+    rec.inputs = Some(inputs(args));
+    super::super::output::write_and_print(&rec, &result, &args.checks)?;
+    // The acquisition holds a copy of the station: the calibration is
+    // where --station came from.
+    let options = mfd::report::page::ReportOptions {
+        calibration: args.station.parent().map(std::path::Path::to_path_buf),
+        ..Default::default()
+    };
+    let report = mfd::report::page::write(&result, None, &options)?;
+    println!("wrote the report {}", report.display());
+    Ok(())
+}
+
+/// The error of an acquisition the operator interrupted, after saying how
+/// to go on.
+fn interrupted(
+    args: &MeasureArgs,
+    report: &Report,
+    measurement: &Measurement<'_>,
+) -> anyhow::Error {
+    println!(
+        "interrupted: continue with `mfd measure ... --resume`, or reconstruct \
+         what is there with `mfd reconstruct {}`",
+        args.out.join("acquisition").display()
+    );
+    super::super::exit::classified(
+        super::super::exit::Class::Interrupted,
+        anyhow::anyhow!(
+            "interrupted by the operator: {} of {} frames recorded in {}",
+            measurement.recorded(),
+            report.counters.total,
+            measurement.dir().display()
+        ),
+    )
+}
+
+/// The reconstruction's options from the flags: the surfaces' (unless
+/// `--no-surfaces`) with the station's uncertainty found for them, the
+/// refined degrees of freedom, the estimator and the checks.
+fn options(args: &MeasureArgs, station: &Station) -> anyhow::Result<Options> {
     let opts = args.surfaces.options(DEFAULT_EDGE_MARGIN_MM)?;
     let surfaces = (!args.surfaces.no_surfaces).then_some(opts);
     let station_uncertainty = match surfaces {
@@ -59,22 +103,11 @@ pub(super) fn finish(
         limits: args.checks.limits(),
         ..Options::default()
     };
-    let mut fitting = |done: usize, total: usize| {
-        if let Some(s) = served {
-            s.fitting(done, total);
-        }
-    };
-    let mut rec = pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut fitting)?;
-    if let Some(s) = rec.spectral.as_mut() {
-        s.read_s = acquire_s;
-        if let Some(served) = served {
-            served.console.set_spectral(mfd::console::Spectral::Done {
-                both_found: s.maps.found_both(),
-                pixels: s.fitted_pixels,
-            });
-        }
-    }
-    let result = args.out.join("result");
+    Ok(options)
+}
+
+/// The result's inputs: the acquisition (its manifest's hash) and the station.
+fn inputs(args: &MeasureArgs) -> mfd::pipeline::Inputs {
     let mut inputs = mfd::pipeline::Inputs::new();
     let manifest = args
         .out
@@ -88,15 +121,5 @@ pub(super) fn finish(
                 sha256: m.sha256,
             });
     inputs.station = mfd::pipeline::InputFile::of(&args.station).ok();
-    rec.inputs = Some(inputs);
-    super::super::output::write_and_print(&rec, &result, &args.checks)?;
-    // The acquisition holds a copy of the station: the calibration is
-    // where --station came from.
-    let options = mfd::report::page::ReportOptions {
-        calibration: args.station.parent().map(std::path::Path::to_path_buf),
-        ..Default::default()
-    };
-    let report = mfd::report::page::write(&result, None, &options)?;
-    println!("wrote the report {}", report.display());
-    Ok(())
+    inputs
 }
