@@ -13,23 +13,22 @@ use serde::Serialize;
 use crate::acquire::acquisition::FrameInfo;
 use crate::budget::scene::{self, auto_stride, bound_map, SceneOptions};
 use crate::optics::station::Station;
-use crate::optics::trace::{Miss, Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
-use crate::optics::zernike::ZernikeSurface;
-use crate::solve::spectral::bound::truth_cov_map;
+use crate::optics::trace::TracedView;
 use crate::solve::spectral::model::Design;
-use crate::solve::spectral::pixel::RESOLVE_SIGMAS;
 use crate::solve::surfaces::{reconstruct, Observations, Uncertainty};
 
 use super::ambiguity::{self, Ambiguity};
 use super::converge::{self, Convergence};
-use super::stage::{self, StageCheck};
+use super::stage::StageCheck;
 use super::{invalid, PlanError, PlanOptions};
 
-/// Fraction of the pixels with both reflections that must be separable
-/// for the schedule to measure the back: nine in ten (the surface solver
-/// fits the back from the pixels it is given; a tenth lost at the rim
-/// costs little, most of them lost leave the back to the front's slopes).
-pub const SEPARABLE_FRACTION: f64 = 0.9;
+mod pixels;
+mod reasons;
+mod separation;
+
+pub use pixels::{run_stage, sample_pixels, stage_pixels, traced_view};
+pub use reasons::surface_domain_unmeasurable;
+pub use separation::{pixel_cov, separation, Separation, SEPARABLE_FRACTION};
 
 /// Which Cramér–Rao bound a prediction is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -98,21 +97,6 @@ impl SurfacePrediction {
     }
 }
 
-/// Whether the per-pixel stage can tell the two reflections apart.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Separation {
-    /// Sample pixels with both reflections.
-    pub pixels: usize,
-    /// Their median front–back distance on the screen, px.
-    pub median_separation_px: f64,
-    /// Fraction of them whose separation exceeds [`RESOLVE_SIGMAS`] times
-    /// its bound (the spectral stage's own test for reporting both points).
-    pub separable_fraction: f64,
-    /// At least [`SEPARABLE_FRACTION`] of them are separable (true when no
-    /// pixel has two reflections: there is nothing to separate).
-    pub separable: bool,
-}
-
 /// The prediction of one schedule.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Prediction {
@@ -141,6 +125,8 @@ pub struct Prediction {
     pub ambiguity: Ambiguity,
     /// The spectral stage run on sample pixels at the planned noise
     /// ([`stage::stage_check`]): whether it finds the true points.
+    ///
+    /// [`stage::stage_check`]: super::stage::stage_check
     pub stage: StageCheck,
     /// The surface-domain fit's convergence from the flat plate
     /// ([`converge::convergence`]): the measurability rule where the bound
@@ -154,174 +140,6 @@ pub struct Prediction {
     pub not_measurable_because: Option<String>,
     /// The block size the bound was evaluated on, camera px.
     pub bound_stride_px: usize,
-}
-
-/// The traced flat plate with the back's weight scaled (0: the back path
-/// removed, an AR-coated back).
-pub fn traced_view(station: &Station, back_scale: f64) -> Result<TracedView, PlanError> {
-    let e = &station.element;
-    let flat = ZernikeSurface::flat(
-        e.aperture_radius_mm,
-        [e.aperture_center_mm.x, e.aperture_center_mm.y],
-    )
-    .map_err(scene::BudgetError::from)?;
-    let plate = Plate::new(station, flat.clone(), flat, DEFAULT_EDGE_MARGIN_MM);
-    let mut view = TracedView::trace(station, &plate);
-    for p in &mut view.pixels {
-        if back_scale == 0.0 {
-            p.back = Err(Miss::ElementMissed);
-        } else if let Ok(h) = &mut p.back {
-            h.weight *= back_scale;
-        }
-        p.third = Err(Miss::ElementMissed);
-    }
-    Ok(view)
-}
-
-/// Up to `n` lit pixels spread evenly over the view (every k-th), those
-/// with both reflections when `both`.
-pub fn sample_pixels(view: &TracedView, n: usize, both: bool) -> Vec<usize> {
-    let lit: Vec<usize> = (0..view.pixels.len())
-        .filter(|&q| {
-            let p = &view.pixels[q];
-            if both {
-                p.front.is_ok() && p.back.is_ok_and(|h| h.weight > 0.0)
-            } else {
-                p.front.is_ok() || p.back.is_ok_and(|h| h.weight > 0.0)
-            }
-        })
-        .collect();
-    let step = lit.len().div_ceil(n.max(1)).max(1);
-    lit.into_iter().step_by(step).collect()
-}
-
-/// Up to `n` pixels spread evenly over the sensor whose reflections in
-/// the expected plate `bent` are those of the flat prediction `flat` (no
-/// path appears or leaves at the rim between them), with both reflections
-/// when `both`: the pixels the stage is run on.
-pub fn stage_pixels(flat: &TracedView, bent: &TracedView, n: usize, both: bool) -> Vec<usize> {
-    let same = |q: usize| {
-        let (a, b) = (&flat.pixels[q], &bent.pixels[q]);
-        a.front.is_ok() == b.front.is_ok() && a.back.is_ok() == b.back.is_ok()
-    };
-    let lit: Vec<usize> = (0..flat.pixels.len())
-        .filter(|&q| {
-            let p = &flat.pixels[q];
-            let ok = if both {
-                p.front.is_ok() && p.back.is_ok_and(|h| h.weight > 0.0)
-            } else {
-                p.front.is_ok()
-            };
-            ok && same(q)
-        })
-        .collect();
-    let step = lit.len().div_ceil(n.max(1)).max(1);
-    lit.into_iter().step_by(step).collect()
-}
-
-/// The stage run on `n` sample pixels of `frames`' design (see
-/// [`stage::stage_check`]): the prior is the station's flat plate with
-/// both paths (what the stage holds, AR-coated or not), the truth the
-/// expected plate.
-pub fn run_stage(
-    station: &Station,
-    design: &Design,
-    view: &TracedView,
-    bent: &TracedView,
-    n: usize,
-    opts: &PlanOptions,
-) -> Result<StageCheck, PlanError> {
-    let full;
-    let prior = if opts.back_scale == 1.0 {
-        view
-    } else {
-        full = traced_view(station, 1.0)?;
-        &full
-    };
-    let both = opts.back_scale > 0.0;
-    let pixels = stage_pixels(view, bent, n, both);
-    let gain = opts.radiometry.gain(view);
-    Ok(stage::stage_check(
-        design, prior, bent, &pixels, gain, opts, STAGE_SEED,
-    ))
-}
-
-/// The noise draws of the stage's check: fixed, so that a plan is the
-/// same every time it is made.
-pub const STAGE_SEED: u64 = 0x005e_ed17;
-
-/// Sample pixels the surface-domain fit's iteration is run on
-/// ([`converge::pixels_converge`]).
-pub const CONVERGENCE_PIXELS: usize = 64;
-
-/// Sample pixels the stage is run on by [`predict`].
-pub const STAGE_PIXELS: usize = 64;
-
-/// The bound's covariance of one pixel (`screen_cov.npy` layout, 16 values).
-pub fn pixel_cov(
-    design: &Design,
-    view: &TracedView,
-    q: usize,
-    gain: f64,
-    opts: &PlanOptions,
-) -> Vec<f64> {
-    let r = &opts.radiometry;
-    let one = TracedView {
-        width: 1,
-        height: 1,
-        pixels: vec![view.pixels[q]],
-    };
-    truth_cov_map(
-        design,
-        &one,
-        gain,
-        r.ambient,
-        r.tau_max.powi(-2),
-        r.sigma_counts(),
-    )
-}
-
-/// Separability on the sample pixels `both` (pixels with two reflections).
-pub fn separation(
-    design: &Design,
-    view: &TracedView,
-    both: &[usize],
-    gain: f64,
-    opts: &PlanOptions,
-) -> Separation {
-    let mut seps = Vec::new();
-    let mut good = 0usize;
-    for &q in both {
-        let p = &view.pixels[q];
-        let (Ok(f), Ok(b)) = (p.front, p.back) else {
-            continue;
-        };
-        let d = [b.u - f.u, b.v - f.v];
-        let dist = d[0].hypot(d[1]);
-        seps.push(dist);
-        let c = pixel_cov(design, view, q, gain, opts);
-        // Var of the separation along d: Var(Δ) with Δ = (u2 − u1, v2 − v1).
-        let at = |a: usize, b: usize| c[4 * a + b];
-        let mut var = 0.0;
-        for (a, wa) in [(0, -d[0]), (1, -d[1]), (2, d[0]), (3, d[1])] {
-            for (b, wb) in [(0, -d[0]), (1, -d[1]), (2, d[0]), (3, d[1])] {
-                var += wa * wb * at(a, b);
-            }
-        }
-        let sd = (var / (dist * dist).max(1e-300)).sqrt();
-        if sd.is_finite() && RESOLVE_SIGMAS * sd < dist {
-            good += 1;
-        }
-    }
-    seps.sort_by(f64::total_cmp);
-    let n = seps.len();
-    let frac = if n == 0 { 1.0 } else { good as f64 / n as f64 };
-    Separation {
-        pixels: n,
-        median_separation_px: seps.get(n / 2).copied().unwrap_or(f64::NAN),
-        separable_fraction: frac,
-        separable: frac >= SEPARABLE_FRACTION,
-    }
 }
 
 /// The prediction of `frames` (display order) on `station`.
@@ -363,35 +181,64 @@ pub fn predict(
         spread,
     );
     let not_measurable_because = match bound {
-        BoundKind::PerPixel => (!stage.measurable).then(|| {
-            format!(
-                "the spectral stage ({} engine), run on {} sample pixels at this noise, found the true points on {:.0} % of them (needs {:.0} %; no signal detected on {:.0} %): give more frames or spread τ wider",
-                stage.engine,
-                stage.pixels,
-                100.0 * stage.found_fraction,
-                100.0 * stage::STAGE_FRACTION,
-                100.0 * stage.no_signal_fraction
-            )
-        }),
+        BoundKind::PerPixel => reasons::stage_unmeasurable(&stage),
         BoundKind::SurfaceDomain => surface_domain_unmeasurable(&convergence, &stage),
     };
     let sample = sample_pixels(&view, 200, false);
     let ambiguity = ambiguity::ambiguity(station, frames, &design, (&view, &sample), spread, kappa);
-    let stride = opts.bound_stride_px.unwrap_or_else(|| auto_stride(&view));
-    let mut cov = bound_map(&design, &view, gain, &opts.radiometry, stride);
+    let back_off = reasons::back_not_measured(opts, bound, &separation);
+    let (front, back, stride) =
+        surface_bounds(station, &design, &view, gain, opts, back_off.is_none())?;
+    // `mfd reconstruct` withholds a surface whose expected error is at
+    // least its fitted RMS (`pipeline::withheld`): a bound at the expected
+    // departure or above resolves nothing.
+    let not_measurable_because =
+        not_measurable_because.or_else(|| reasons::front_withheld(&front, opts));
+    Ok(Prediction {
+        frames: frames.len(),
+        patterns_shown: super::timing::switches(frames),
+        seconds: opts.timing.seconds(frames),
+        bound,
+        separation_bins,
+        front,
+        back,
+        back_not_measured_because: back_off,
+        separation,
+        ambiguity,
+        stage,
+        convergence,
+        not_measurable_because,
+        bound_stride_px: stride,
+    })
+}
+
+/// The noise draws of the stage's check: fixed, so that a plan is the
+/// same every time it is made.
+pub const STAGE_SEED: u64 = 0x005e_ed17;
+
+/// Sample pixels the surface-domain fit's iteration is run on
+/// ([`converge::pixels_converge`]).
+pub const CONVERGENCE_PIXELS: usize = 64;
+
+/// Sample pixels the stage is run on by [`predict`].
+pub const STAGE_PIXELS: usize = 64;
+
+/// The bound of both surfaces through the surface solver's normal
+/// equations: every pixel's bound on the block grid (the stride used is
+/// returned), the back's points left out unless `with_back`; the back's
+/// bound only where it is fitted and `with_back`.
+fn surface_bounds(
+    station: &Station,
+    design: &Design,
+    view: &TracedView,
+    gain: f64,
+    opts: &PlanOptions,
+    with_back: bool,
+) -> Result<(SurfacePrediction, Option<SurfacePrediction>, usize), PlanError> {
+    let stride = opts.bound_stride_px.unwrap_or_else(|| auto_stride(view));
+    let mut cov = bound_map(design, view, gain, &opts.radiometry, stride);
     let mut coords = view.screen_coords();
-    let back_off = if opts.back_scale == 0.0 {
-        Some("the back is AR-coated: one reflection".to_string())
-    } else if bound == BoundKind::PerPixel && !separation.separable {
-        Some(format!(
-            "this schedule separates the two reflections on {:.0} % of the pixels (needs {:.0} %): add frames at larger τ or spread τ wider",
-            100.0 * separation.separable_fraction,
-            100.0 * SEPARABLE_FRACTION
-        ))
-    } else {
-        None
-    };
-    if back_off.is_some() {
+    if !with_back {
         // The two-stage estimator reports no back point where it cannot
         // separate them: predict the front from the front points alone,
         // with the bound of the two-reflection fit.
@@ -418,63 +265,9 @@ pub fn predict(
         std_nm: std.to_vec(),
         rms_nm: std.iter().skip(3).map(|s| s * s).sum::<f64>().sqrt(),
     };
-    let back = (sol.back_fitted && back_off.is_none()).then(|| surface(&sol.back_std_nm));
+    let back = (sol.back_fitted && with_back).then(|| surface(&sol.back_std_nm));
     let front = surface(&sol.front_std_nm);
-    // `mfd reconstruct` withholds a surface whose expected error is at
-    // least its fitted RMS (`pipeline::withheld`): a bound at the expected
-    // departure or above resolves nothing.
-    let not_measurable_because = not_measurable_because.or_else(|| {
-        (front.rms_nm >= opts.surface_nm).then(|| {
-            format!(
-                "the predicted front error, {:.0} nm RMS, is at least the expected departure of the surface ({:.0} nm RMS, --surface-nm): the reconstruction would be withheld; give more frames or spread τ wider",
-                front.rms_nm, opts.surface_nm
-            )
-        })
-    });
-    Ok(Prediction {
-        frames: frames.len(),
-        patterns_shown: super::timing::switches(frames),
-        seconds: opts.timing.seconds(frames),
-        bound,
-        separation_bins,
-        front,
-        back,
-        back_not_measured_because: back_off,
-        separation,
-        ambiguity,
-        stage,
-        convergence,
-        not_measurable_because,
-        bound_stride_px: stride,
-    })
-}
-
-/// Why the surface-domain fit will not measure a schedule: its start
-/// outside the basin the fit converges from, or the stage detecting no
-/// signal on more than a tenth of the sample pixels (the fit leaves out
-/// the pixels the stage found no fringes on); `None` when it will.
-pub fn surface_domain_unmeasurable(c: &Convergence, stage: &StageCheck) -> Option<String> {
-    if !c.converges {
-        let worst = c
-            .directions
-            .iter()
-            .map(|d| d.basin_px)
-            .fold(f64::INFINITY, f64::min);
-        return Some(format!(
-            "the reflections are too close to separate pixel by pixel, and the surface-domain fit started from the flat plate does not reach the truth from the prior's spread of {:.1} px (one reflection: from {worst:.1} px; both, noise-free: on {:.0} % of the sample pixels, needs {:.0} %): add frames at low τ, or start from a closer prior",
-            c.prior_spread_px,
-            100.0 * c.pixel_fraction,
-            100.0 * converge::PIXEL_FRACTION
-        ));
-    }
-    (stage.no_signal_fraction > 1.0 - stage::STAGE_FRACTION).then(|| {
-        format!(
-            "the spectral stage detected no fringes on {:.0} % of {} sample pixels at this noise (the surface-domain fit leaves those out; at most {:.0} %): give more frames",
-            100.0 * stage.no_signal_fraction,
-            stage.pixels,
-            100.0 * (1.0 - stage::STAGE_FRACTION)
-        )
-    })
+    Ok((front, back, stride))
 }
 
 impl Prediction {
