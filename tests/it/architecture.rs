@@ -519,3 +519,42 @@ fn a_use_of_a_higher_floor_is_named() {
         broken[0]
     );
 }
+
+/// The house keeps files short enough to read whole (STYLE.md: under ~500
+/// lines): every `.rs` file of the library, the binary, the tests and the
+/// examples, counted as `wc -l` does.
+const MAX_FILE_LINES: usize = 500;
+
+#[test]
+fn no_source_file_is_over_500_lines() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in ["src", "tests", "examples"] {
+        rust_files(&root.join(dir), &mut files);
+    }
+    assert!(
+        files.len() > 100,
+        "found only {} files: the walk is broken",
+        files.len()
+    );
+    let long: Vec<String> = files
+        .iter()
+        .filter_map(|f| {
+            let text =
+                std::fs::read_to_string(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            let lines = text.matches('\n').count();
+            (lines > MAX_FILE_LINES).then(|| {
+                format!(
+                    "{}: {lines} lines",
+                    f.strip_prefix(root).unwrap_or(f).display()
+                )
+            })
+        })
+        .collect();
+    assert!(
+        long.is_empty(),
+        "{} files over {MAX_FILE_LINES} lines; split each by concern:\n{}",
+        long.len(),
+        long.join("\n")
+    );
+}
