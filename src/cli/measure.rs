@@ -11,7 +11,6 @@ use anyhow::Context;
 use clap::Args;
 
 use mfd::acquire::display::PatternDisplay;
-use mfd::acquire::patterns::Pattern;
 use mfd::live::{sha256_hex, Measurement, Prepared, SequencerConfig, Start};
 use mfd::optics::station::{Dof, Station};
 
@@ -162,7 +161,9 @@ pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
 /// console beside it.
 fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow::Result<()> {
     let station = Station::load(&args.station)?;
-    let patterns = patterns(args, &station)?;
+    let patterns = args
+        .schedule
+        .patterns(args.schedule_file.as_deref(), &station)?;
     let devices::Opened {
         camera,
         display,
@@ -231,29 +232,4 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
         );
     }
     outcome
-}
-
-/// The patterns to show: `--schedule`'s file, or the schedule flags'.
-/// Bounded before expansion: frame count (validate) and τ against what
-/// the station's screen can show (its Nyquist limit).
-fn patterns(args: &MeasureArgs, station: &Station) -> anyhow::Result<Vec<Pattern>> {
-    let (sw, sh) = (station.screen.width, station.screen.height);
-    let input = |e: anyhow::Error| super::exit::classified(super::exit::Class::Input, e);
-    let patterns = match &args.schedule_file {
-        Some(p) => {
-            let file = mfd::acquire::schedule_file::load(p).map_err(|e| input(e.into()))?;
-            file.check_against_screen(p, sw, sh)
-                .map_err(|e| input(e.into()))?;
-            file.patterns()
-        }
-        None => {
-            let schedule = args.schedule.schedule();
-            schedule.validate().map_err(|e| input(e.into()))?;
-            schedule
-                .check_against_screen(sw, sh)
-                .map_err(|e| input(e.into()))?;
-            schedule.patterns()
-        }
-    };
-    Ok(patterns)
 }

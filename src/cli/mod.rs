@@ -169,6 +169,38 @@ pub struct ScheduleArgs {
 }
 
 impl ScheduleArgs {
+    /// The patterns to show, in order: those of the schedule file `file`
+    /// (`mfd-schedule/1`) where one is given, else of these flags; checked
+    /// before expansion (frame count, τ against what the station's screen
+    /// can show). Shared by `mfd measure` and `mfd simulate`.
+    ///
+    /// # Errors
+    /// The file's or the schedule's error, classed as bad input.
+    pub fn patterns(
+        &self,
+        file: Option<&Path>,
+        station: &Station,
+    ) -> anyhow::Result<Vec<mfd::acquire::patterns::Pattern>> {
+        let (sw, sh) = (station.screen.width, station.screen.height);
+        let input = |e: anyhow::Error| exit::classified(exit::Class::Input, e);
+        match file {
+            Some(p) => {
+                let file = mfd::acquire::schedule_file::load(p).map_err(|e| input(e.into()))?;
+                file.check_against_screen(p, sw, sh)
+                    .map_err(|e| input(e.into()))?;
+                Ok(file.patterns())
+            }
+            None => {
+                let schedule = self.schedule();
+                schedule.validate().map_err(|e| input(e.into()))?;
+                schedule
+                    .check_against_screen(sw, sh)
+                    .map_err(|e| input(e.into()))?;
+                Ok(schedule.patterns())
+            }
+        }
+    }
+
     /// The schedule these flags describe.
     pub fn schedule(&self) -> mfd::acquire::patterns::Schedule {
         mfd::acquire::patterns::Schedule {

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use super::exit::{classified, Class};
 use mfd::acquire::acquisition::FrameLayout;
 use mfd::formats::surfaces_file::SurfacesFile;
 use mfd::optics::station::Station;
@@ -118,26 +117,9 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             dtype: mfd::formats::npy::StackDtype::U16,
         },
     };
-    // Bounded before expansion: frame count (validate) and τ against
-    // what the station's screen can show.
-    let (sw, sh) = (station.screen.width, station.screen.height);
-    let input = |e: anyhow::Error| classified(Class::Input, e);
-    let patterns = match &args.schedule_file {
-        Some(p) => {
-            let file = mfd::acquire::schedule_file::load(p).map_err(|e| input(e.into()))?;
-            file.check_against_screen(p, sw, sh)
-                .map_err(|e| input(e.into()))?;
-            file.patterns()
-        }
-        None => {
-            let schedule = args.schedule.schedule();
-            schedule.validate().map_err(|e| input(e.into()))?;
-            schedule
-                .check_against_screen(sw, sh)
-                .map_err(|e| input(e.into()))?;
-            schedule.patterns()
-        }
-    };
+    let patterns = args
+        .schedule
+        .patterns(args.schedule_file.as_deref(), &station)?;
     let sim = Simulation {
         station: &station,
         plate: &plate,
