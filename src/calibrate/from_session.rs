@@ -14,7 +14,7 @@ use super::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
 use super::session::{Session, SessionError};
 use crate::acquire::acquisition::{Acquisition, AcquisitionError};
 use crate::optics::station::Station;
-use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralSolver};
+use crate::solve::spectral::{FeedError, SpectralConfig, SpectralError, SpectralSolver};
 
 /// The σ taken for a centroid given as `image_px`, px per axis: the
 /// session format states none, and a centroid a lab's own tool found on a
@@ -166,13 +166,13 @@ pub fn decode_flat(
         source,
     };
     let mut solver = SpectralSolver::new(&station, acq.frames(), config.clone()).map_err(decode)?;
-    let mut frame = Vec::new();
     let frames = acq.frames().len();
-    for k in 0..frames {
-        let index = acq.frames()[k].index;
-        acq.read_frame(index, &mut frame).map_err(flat_err)?;
-        solver.push_frame(index, &frame).map_err(decode)?;
-    }
+    solver
+        .push_acquisition(&acq, frames, &mut |_, _| {})
+        .map_err(|e| match e {
+            FeedError::Read(e) => flat_err(e),
+            FeedError::Push(e) => decode(e),
+        })?;
     let maps = solver.solve().map_err(decode)?;
     let (coords, cov) = (maps.screen_coords(), maps.screen_cov());
     let w = cam.width as usize;

@@ -18,7 +18,7 @@ use crate::acquire::camera::{Camera, CameraConfig, CameraError, TriggerMode};
 use crate::acquire::display::PatternDisplay;
 use crate::acquire::patterns::Pattern;
 use crate::optics::station::Station;
-use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralSolver};
+use crate::solve::spectral::{FeedError, SpectralConfig, SpectralError, SpectralSolver};
 
 /// Errors of setting up or running a measurement.
 #[derive(Debug, thiserror::Error)]
@@ -338,11 +338,12 @@ fn start_solver(
     let mut solver = SpectralSolver::new(station, &frames, config)?;
     if recorded > 0 {
         let acq = Acquisition::open(dir)?;
-        let mut frame = Vec::new();
-        for index in 0..recorded {
-            acq.read_frame(index, &mut frame)?;
-            solver.push_frame(index, &frame)?;
-        }
+        solver
+            .push_acquisition(&acq, recorded, &mut |_, _| {})
+            .map_err(|e| match e {
+                FeedError::Read(e) => MeasurementError::from(e),
+                FeedError::Push(e) => MeasurementError::from(e),
+            })?;
     }
     Ok(solver)
 }

@@ -31,6 +31,7 @@
 mod batch;
 pub mod bound;
 mod config;
+mod feed;
 mod maps;
 pub mod model;
 pub mod periodogram;
@@ -43,6 +44,7 @@ mod stream;
 
 pub use batch::{CpuFits, FitBackend, FitBatch};
 pub use config::{Engine, SpectralConfig, SpectralError, SERIES_LIMIT_BYTES};
+pub use feed::FeedError;
 pub use maps::SpectralMaps;
 pub(crate) use prior::candidates as prior_candidates;
 pub use prior::flat_plate_prior;

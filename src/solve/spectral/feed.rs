@@ -1,0 +1,50 @@
+//! Frames of a recorded acquisition fed into the spectral solver: the one
+//! loop that `pipeline::reconstruct`, the calibration's reference flat and
+//! a resumed live measurement share.
+
+use crate::acquire::acquisition::{Acquisition, AcquisitionError};
+
+use super::{SpectralError, SpectralSolver};
+
+/// Why feeding an acquisition stopped: reading a frame, or the solver
+/// refusing it. Callers report the two differently (a file at fault, or the
+/// data).
+#[derive(Debug, thiserror::Error)]
+pub enum FeedError {
+    /// A frame could not be read.
+    #[error(transparent)]
+    Read(#[from] AcquisitionError),
+    /// The solver refused a frame.
+    #[error(transparent)]
+    Push(#[from] SpectralError),
+}
+
+impl SpectralSolver {
+    /// Reads the first `count` frames of `acq`, in its manifest's order, and
+    /// pushes each under its own index; `progress(k, count)` after the k-th.
+    /// Returns the largest count any of them holds (the saturation check's
+    /// input).
+    ///
+    /// # Errors
+    /// [`FeedError::Read`] for a frame that cannot be read,
+    /// [`FeedError::Push`] for one the solver refuses; the frames before it
+    /// stay pushed.
+    pub fn push_acquisition(
+        &mut self,
+        acq: &Acquisition,
+        count: usize,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<u16, FeedError> {
+        let count = count.min(acq.frames().len());
+        let mut frame = Vec::new();
+        let mut max_count = 0u16;
+        for k in 0..count {
+            let index = acq.frames()[k].index;
+            acq.read_frame(index, &mut frame)?;
+            max_count = frame.iter().copied().fold(max_count, u16::max);
+            self.push_frame(index, &frame)?;
+            progress(k + 1, count);
+        }
+        Ok(max_count)
+    }
+}
