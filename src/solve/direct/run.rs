@@ -2,6 +2,8 @@
 //! above): predict, linearise every pixel, solve the surfaces on the
 //! pseudo-observations, step with halving until the coefficients stop
 //! moving on the scale of their own σ.
+//! The pixels, the step, the third reflection and the iteration itself
+//! are in `pixels`, `step`, `third` and `iterate`.
 
 mod iterate;
 mod pixels;
