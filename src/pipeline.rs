@@ -244,27 +244,7 @@ pub fn reconstruct(
     let owned;
     let (first, solver): (First, Option<&SpectralSolver>) = match input {
         Input::Acquisition(acq) => {
-            crate::acquire::acquisition::check_against_station(acq, station)?;
-            let t0 = Instant::now();
-            acq.check_resolution(station.camera.width, station.camera.height)?;
-            let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
-            let total = acq.frames().len();
-            let mut frame = Vec::new();
-            let mut max_count = 0u16;
-            for k in 0..total {
-                let index = acq.frames()[k].index;
-                acq.read_frame(index, &mut frame)?;
-                max_count = frame.iter().copied().fold(max_count, u16::max);
-                solver.push_frame(index, &frame)?;
-                progress(k + 1, total);
-            }
-            let stage = spectral_stage(
-                &mut solver,
-                station,
-                options,
-                t0.elapsed().as_secs_f64(),
-                Some(max_count),
-            )?;
+            let (stage, solver) = read_acquisition(acq, station, options, progress)?;
             owned = solver;
             (First::Spectral(stage), Some(&owned))
         }
@@ -292,12 +272,48 @@ pub fn reconstruct(
     })
 }
 
+/// Reads every frame of `acq` into a new spectral solver, calling
+/// `progress(done, total)` after each, and runs the spectral stage; returns
+/// the stage and the solver (the surface-domain estimator fits its frames).
+fn read_acquisition(
+    acq: &mut Acquisition,
+    station: &Station,
+    options: &Options,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(SpectralStage, SpectralSolver), PipelineError> {
+    crate::acquire::acquisition::check_against_station(acq, station)?;
+    let t0 = Instant::now();
+    acq.check_resolution(station.camera.width, station.camera.height)?;
+    let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
+    let total = acq.frames().len();
+    let mut frame = Vec::new();
+    let mut max_count = 0u16;
+    for k in 0..total {
+        let index = acq.frames()[k].index;
+        acq.read_frame(index, &mut frame)?;
+        max_count = frame.iter().copied().fold(max_count, u16::max);
+        solver.push_frame(index, &frame)?;
+        progress(k + 1, total);
+    }
+    let stage = spectral_stage(
+        &mut solver,
+        station,
+        options,
+        t0.elapsed().as_secs_f64(),
+        Some(max_count),
+    )?;
+    Ok((stage, solver))
+}
+
 /// Where the surface stage's screen points come from.
 enum First {
     Spectral(SpectralStage),
     Points(ScreenPoints),
 }
 
+/// The surface stage on the spectral stage's maps (or the frames, by the
+/// estimator asked for) or on screen points: the surfaces, refined with the
+/// station where asked, their error budget, summary and withheld surfaces.
 fn surface_stage(
     first: &First,
     solver: Option<&SpectralSolver>,
@@ -307,23 +323,7 @@ fn surface_stage(
 ) -> Result<SurfaceStage, SurfaceError> {
     let (uncertainty, refine) = (options.station_uncertainty.as_ref(), &options.refine[..]);
     let t = Instant::now();
-    let (obs, mut solution, direct) = match (first, solver) {
-        (First::Spectral(s), Some(solver)) => {
-            estimator::surfaces_from_frames(solver, &s.maps, station, opts, options.estimator)?
-        }
-        (First::Spectral(s), None) => {
-            let cov = s.maps.screen_cov();
-            let obs =
-                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?;
-            let sol = solve_surfaces(&obs, station, opts)?;
-            (obs, sol, None)
-        }
-        (First::Points(p), _) => {
-            let obs = Observations::from_maps(station, &p.coords, p.uncertainty())?;
-            let sol = solve_surfaces(&obs, station, opts)?;
-            (obs, sol, None)
-        }
-    };
+    let (obs, mut solution, direct) = first_surfaces(first, solver, station, opts, options)?;
     let refined = match uncertainty {
         Some(u) if !refine.is_empty() => {
             let r = refine_station(&obs, station, u, refine, &solution, opts)?;
@@ -353,16 +353,14 @@ fn surface_stage(
         Some(u) => Some(budget(&obs, station, u, &solution, opts)?),
         None => None,
     };
-    let mut summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
-    if let Some(b) = &budget {
-        summary = summary.with_budget(b);
-    }
-    if let Some(r) = &refined {
-        summary = summary.with_refined(r);
-    }
-    if let Some(d) = &direct {
-        summary = summary.with_direct(d);
-    }
+    let mut summary = stage_summary(
+        &obs,
+        &solution,
+        t.elapsed().as_secs_f64(),
+        budget.as_ref(),
+        refined.as_ref(),
+        direct.as_ref(),
+    );
     let withheld = withheld(&summary, direct.as_ref(), options.max_expected_nm);
     summary.withheld = withheld.clone();
     Ok(SurfaceStage {
@@ -373,6 +371,59 @@ fn surface_stage(
         direct,
         withheld,
     })
+}
+
+/// The surfaces as first solved on the station given: from the frames by
+/// the estimator asked for where a solver holds them, else from the
+/// spectral maps' points or the screen points given.
+fn first_surfaces(
+    first: &First,
+    solver: Option<&SpectralSolver>,
+    station: &Station,
+    opts: &SurfaceOptions,
+    options: &Options,
+) -> Result<(Observations, SurfaceSolution, Option<DirectReport>), SurfaceError> {
+    Ok(match (first, solver) {
+        (First::Spectral(s), Some(solver)) => {
+            estimator::surfaces_from_frames(solver, &s.maps, station, opts, options.estimator)?
+        }
+        (First::Spectral(s), None) => {
+            let cov = s.maps.screen_cov();
+            let obs =
+                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?;
+            let sol = solve_surfaces(&obs, station, opts)?;
+            (obs, sol, None)
+        }
+        (First::Points(p), _) => {
+            let obs = Observations::from_maps(station, &p.coords, p.uncertainty())?;
+            let sol = solve_surfaces(&obs, station, opts)?;
+            (obs, sol, None)
+        }
+    })
+}
+
+/// The summary of `solution`, solved from `obs` in `seconds`, with the
+/// station's part of `budget`, the estimates of `refined` and the account
+/// of the surface-domain fit, where each exists.
+fn stage_summary(
+    obs: &Observations,
+    solution: &SurfaceSolution,
+    seconds: f64,
+    budget: Option<&Budget>,
+    refined: Option<&Refined>,
+    direct: Option<&DirectReport>,
+) -> Summary {
+    let mut summary = Summary::new(obs, solution, seconds);
+    if let Some(b) = budget {
+        summary = summary.with_budget(b);
+    }
+    if let Some(r) = refined {
+        summary = summary.with_refined(r);
+    }
+    if let Some(d) = direct {
+        summary = summary.with_direct(d);
+    }
+    summary
 }
 
 /// [`crate::budget::refine::refine`] with the solution's numbers of terms
