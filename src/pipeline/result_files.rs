@@ -4,12 +4,14 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{result_dir, PipelineError, Reconstruction, SurfaceStage, HEIGHT_GRID};
+use super::{result_dir, DirectReport, PipelineError, Reconstruction, SurfaceStage, HEIGHT_GRID};
+use crate::budget::refine::Refined;
 use crate::formats::npy;
 use crate::formats::surfaces_file::{SurfaceCoefficients, SurfaceEntry, SurfacesFile, ZernikeSpec};
+use crate::optics::zernike::ZernikeSurface;
 use crate::report::pictures;
 use crate::report::summary::Summary;
-use crate::solve::surfaces::report::height_grid;
+use crate::solve::surfaces::report::{height_grid, SurfaceFigures};
 
 impl Reconstruction {
     /// Writes every result that exists into `out` (created if needed): the
@@ -55,27 +57,10 @@ fn write_surfaces(
     let mut written = vec![out.join("surfaces.json")];
     surfaces_file(stage).save(&written[0])?;
     if let Some(r) = &stage.refined {
-        // The refined station and its uncertainty, for the next measurement.
-        let path = out.join("station_refined.toml");
-        r.station.save(&path)?;
-        written.push(path);
-        let path = out.join("station_refined_uncertainty.toml");
-        let mut unc = r.uncertainty.clone();
-        unc.station = "station_refined.toml".into();
-        unc.save(&path)?;
-        written.push(path);
+        written.extend(write_refined(out, r)?);
     }
     if let Some(d) = &stage.direct {
-        // The surface-domain fit's per-pixel maps: the points its surfaces
-        // predict, and each pixel's pull against them (a defect the
-        // Zernike model cannot follow shows there).
-        let (w, h) = (d.width, d.chi2_map.len() / d.width.max(1));
-        let path = out.join("direct_screen_coords.npy");
-        npy::write_f64(&path, &[h, w, 2, 2], &d.predicted)?;
-        written.push(path);
-        let path = out.join("direct_chi2.npy");
-        npy::write_f64(&path, &[h, w], &d.chi2_map)?;
-        written.push(path);
+        written.extend(write_direct(out, d)?);
     }
     // A withheld surface gets no height map or picture.
     let mut surfaces = Vec::new();
@@ -90,36 +75,80 @@ fn write_surfaces(
         surfaces.push(("back", &sol.back, back));
     }
     for (name, surface, figures) in surfaces {
-        let grid = height_grid(surface, HEIGHT_GRID);
-        let path = out.join(format!("{name}_height_nm.npy"));
-        npy::write_f64(&path, &[HEIGHT_GRID, HEIGHT_GRID], &grid)?;
-        written.push(path);
-        written.push(pictures::surface(
-            out,
-            name,
-            surface,
-            &grid,
-            HEIGHT_GRID,
-            figures,
-        )?);
-        let back = name == "back";
-        let total = summary
-            .station
-            .as_ref()
-            .and_then(|s| {
-                if back {
-                    s.back.as_ref()
-                } else {
-                    Some(&s.front)
-                }
-            })
-            .map(|s| &s.total_std_nm[..]);
-        written.extend(pictures::coefficients(out, name, figures, total)?);
+        written.extend(write_surface(out, name, surface, figures, summary)?);
     }
     written.extend(pictures::breakdown(out, summary)?);
     let path = out.join("summary.json");
     write_json(&path, summary)?;
     written.push(path);
+    Ok(written)
+}
+
+/// The refined station and its uncertainty, for the next measurement.
+fn write_refined(out: &Path, r: &Refined) -> Result<Vec<PathBuf>, PipelineError> {
+    let mut written = Vec::new();
+    let path = out.join("station_refined.toml");
+    r.station.save(&path)?;
+    written.push(path);
+    let path = out.join("station_refined_uncertainty.toml");
+    let mut unc = r.uncertainty.clone();
+    unc.station = "station_refined.toml".into();
+    unc.save(&path)?;
+    written.push(path);
+    Ok(written)
+}
+
+/// The surface-domain fit's per-pixel maps: the points its surfaces
+/// predict, and each pixel's pull against them (a defect the Zernike model
+/// cannot follow shows there).
+fn write_direct(out: &Path, d: &DirectReport) -> Result<Vec<PathBuf>, PipelineError> {
+    let mut written = Vec::new();
+    let (w, h) = (d.width, d.chi2_map.len() / d.width.max(1));
+    let path = out.join("direct_screen_coords.npy");
+    npy::write_f64(&path, &[h, w, 2, 2], &d.predicted)?;
+    written.push(path);
+    let path = out.join("direct_chi2.npy");
+    npy::write_f64(&path, &[h, w], &d.chi2_map)?;
+    written.push(path);
+    Ok(written)
+}
+
+/// One surface's height map (`{name}_height_nm.npy`) and its pictures: the
+/// map, and the coefficients with the total σ where the summary has the
+/// station's part.
+fn write_surface(
+    out: &Path,
+    name: &str,
+    surface: &ZernikeSurface,
+    figures: &SurfaceFigures,
+    summary: &Summary,
+) -> Result<Vec<PathBuf>, PipelineError> {
+    let mut written = Vec::new();
+    let grid = height_grid(surface, HEIGHT_GRID);
+    let path = out.join(format!("{name}_height_nm.npy"));
+    npy::write_f64(&path, &[HEIGHT_GRID, HEIGHT_GRID], &grid)?;
+    written.push(path);
+    written.push(pictures::surface(
+        out,
+        name,
+        surface,
+        &grid,
+        HEIGHT_GRID,
+        figures,
+    )?);
+    let back = name == "back";
+    let total = summary
+        .station
+        .as_ref()
+        .and_then(|s| {
+            if back {
+                s.back.as_ref()
+            } else {
+                Some(&s.front)
+            }
+        })
+        .map(|s| &s.total_std_nm[..]);
+    written.extend(pictures::coefficients(out, name, figures, total)?);
     Ok(written)
 }
 
@@ -145,7 +174,7 @@ had a point S2 from the back surface)";
 /// a back that was not reconstructed says why.
 pub fn surfaces_file(stage: &SurfaceStage) -> SurfacesFile {
     let (sol, summary) = (&stage.solution, &stage.summary);
-    let entry = |surface: &crate::optics::zernike::ZernikeSurface, back: bool| {
+    let entry = |surface: &ZernikeSurface, back: bool| {
         let (std, expected) = summary
             .reported(back)
             .map_or((None, None), |(s, e)| (Some(s.to_vec()), Some(e)));
