@@ -11,21 +11,17 @@
 //! `mfd reconstruct`, `mfd measure`, the tests and any server call
 //! [`reconstruct`]; the command line only parses arguments and prints.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::acquire::acquisition::{Acquisition, AcquisitionError};
 use crate::budget::Budget;
-use crate::formats::npy::{self, NpyError};
-use crate::formats::surfaces_file::{
-    SurfaceCoefficients, SurfaceEntry, SurfacesFile, SurfacesFileError, ZernikeSpec,
-};
+use crate::formats::npy::NpyError;
+use crate::formats::surfaces_file::SurfacesFileError;
 use crate::optics::station::{Dof, Station, StationUncertainty, UncertaintyError};
 use crate::plot::PlotError;
-use crate::report::pictures;
 use crate::report::summary::Summary;
 use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
-use crate::solve::surfaces::report::height_grid;
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
     Uncertainty,
@@ -34,12 +30,16 @@ use crate::solve::surfaces::{
 pub mod consistency;
 mod estimator;
 pub mod result_dir;
+mod result_files;
+mod screen_points;
 mod station_uncertainty;
 
 pub use crate::solve::direct::DirectReport;
 pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
 pub use estimator::{surfaces_from_frames, withheld, Estimator};
 pub use result_dir::{InputFile, Inputs, Staged};
+pub use result_files::{surfaces_file, BACK_NOT_RECONSTRUCTED};
+pub use screen_points::{PointUncertainty, ScreenPoints};
 
 use crate::budget::assemble::budget;
 use crate::budget::refine::{refine, RefineError, Refined};
@@ -135,96 +135,6 @@ pub enum PipelineError {
         #[source]
         source: serde_json::Error,
     },
-}
-
-/// The uncertainty of screen points handed to the surface stage.
-#[derive(Debug, Clone)]
-pub enum PointUncertainty {
-    /// `[rows, cols, 4, 4]`: covariance of u1, v1, u2, v2 per pixel, px².
-    Covariance(Vec<f64>),
-    /// `[rows, cols, 2, 2]`: standard deviations, px.
-    Std(Vec<f64>),
-    /// None known: the residuals set the scale.
-    Unknown,
-}
-
-/// Screen points of every camera pixel, `[rows, cols, 2, 2]` (spec layout),
-/// with their uncertainty.
-#[derive(Debug, Clone)]
-pub struct ScreenPoints {
-    /// u, v of front and back, screen px, NaN where not found.
-    pub coords: Vec<f64>,
-    /// Their uncertainty.
-    pub uncertainty: PointUncertainty,
-}
-
-impl ScreenPoints {
-    /// Reads `screen_coords.npy` at `coords` and its uncertainty: `std`
-    /// (`[rows, cols, 2, 2]`) when given, else `screen_cov.npy` or
-    /// `screen_std.npy` beside it when one exists, else none. Returns the
-    /// file the uncertainty came from.
-    ///
-    /// # Errors
-    /// [`PipelineError::Npy`] for unreadable files, [`PipelineError::Shape`]
-    /// when an array does not fit the station's camera.
-    pub fn load(
-        coords: &Path,
-        std: Option<&Path>,
-        station: &Station,
-    ) -> Result<(ScreenPoints, Option<PathBuf>), PipelineError> {
-        let (rows, cols) = (
-            station.camera.height as usize,
-            station.camera.width as usize,
-        );
-        let read = |path: &Path, k: usize| -> Result<Vec<f64>, PipelineError> {
-            let expected = vec![rows, cols, k, k];
-            let (found, data) = npy::read_f64(path)?;
-            if found != expected {
-                let what = if k == 2 {
-                    "rows, columns, reflection, u/v"
-                } else {
-                    "rows, columns, covariance of u1, v1, u2, v2"
-                };
-                let path = path.to_path_buf();
-                return Err(PipelineError::Shape {
-                    path,
-                    found,
-                    expected,
-                    what,
-                });
-            }
-            Ok(data)
-        };
-        let beside = |name: &str| Some(coords.with_file_name(name)).filter(|p| p.exists());
-        let (source, is_cov) = match std {
-            Some(p) => (Some(p.to_path_buf()), false),
-            None => match beside("screen_cov.npy") {
-                Some(p) => (Some(p), true),
-                None => (beside("screen_std.npy"), false),
-            },
-        };
-        let uncertainty = match &source {
-            None => PointUncertainty::Unknown,
-            Some(p) if is_cov => PointUncertainty::Covariance(read(p, 4)?),
-            Some(p) => PointUncertainty::Std(read(p, 2)?),
-        };
-        let points = ScreenPoints {
-            coords: read(coords, 2)?,
-            uncertainty,
-        };
-        Ok((points, source))
-    }
-}
-
-impl ScreenPoints {
-    /// The uncertainty as the surface stage takes it.
-    fn uncertainty(&self) -> Uncertainty<'_> {
-        match &self.uncertainty {
-            PointUncertainty::Covariance(c) => Uncertainty::Cov(c),
-            PointUncertainty::Std(s) => Uncertainty::Std(s),
-            PointUncertainty::Unknown => Uncertainty::Unknown,
-        }
-    }
 }
 
 /// What a reconstruction starts from.
@@ -334,27 +244,7 @@ pub fn reconstruct(
     let owned;
     let (first, solver): (First, Option<&SpectralSolver>) = match input {
         Input::Acquisition(acq) => {
-            crate::acquire::acquisition::check_against_station(acq, station)?;
-            let t0 = Instant::now();
-            acq.check_resolution(station.camera.width, station.camera.height)?;
-            let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
-            let total = acq.frames().len();
-            let mut frame = Vec::new();
-            let mut max_count = 0u16;
-            for k in 0..total {
-                let index = acq.frames()[k].index;
-                acq.read_frame(index, &mut frame)?;
-                max_count = frame.iter().copied().fold(max_count, u16::max);
-                solver.push_frame(index, &frame)?;
-                progress(k + 1, total);
-            }
-            let stage = spectral_stage(
-                &mut solver,
-                station,
-                options,
-                t0.elapsed().as_secs_f64(),
-                Some(max_count),
-            )?;
+            let (stage, solver) = read_acquisition(acq, station, options, progress)?;
             owned = solver;
             (First::Spectral(stage), Some(&owned))
         }
@@ -382,12 +272,48 @@ pub fn reconstruct(
     })
 }
 
+/// Reads every frame of `acq` into a new spectral solver, calling
+/// `progress(done, total)` after each, and runs the spectral stage; returns
+/// the stage and the solver (the surface-domain estimator fits its frames).
+fn read_acquisition(
+    acq: &mut Acquisition,
+    station: &Station,
+    options: &Options,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(SpectralStage, SpectralSolver), PipelineError> {
+    crate::acquire::acquisition::check_against_station(acq, station)?;
+    let t0 = Instant::now();
+    acq.check_resolution(station.camera.width, station.camera.height)?;
+    let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
+    let total = acq.frames().len();
+    let mut frame = Vec::new();
+    let mut max_count = 0u16;
+    for k in 0..total {
+        let index = acq.frames()[k].index;
+        acq.read_frame(index, &mut frame)?;
+        max_count = frame.iter().copied().fold(max_count, u16::max);
+        solver.push_frame(index, &frame)?;
+        progress(k + 1, total);
+    }
+    let stage = spectral_stage(
+        &mut solver,
+        station,
+        options,
+        t0.elapsed().as_secs_f64(),
+        Some(max_count),
+    )?;
+    Ok((stage, solver))
+}
+
 /// Where the surface stage's screen points come from.
 enum First {
     Spectral(SpectralStage),
     Points(ScreenPoints),
 }
 
+/// The surface stage on the spectral stage's maps (or the frames, by the
+/// estimator asked for) or on screen points: the surfaces, refined with the
+/// station where asked, their error budget, summary and withheld surfaces.
 fn surface_stage(
     first: &First,
     solver: Option<&SpectralSolver>,
@@ -397,23 +323,7 @@ fn surface_stage(
 ) -> Result<SurfaceStage, SurfaceError> {
     let (uncertainty, refine) = (options.station_uncertainty.as_ref(), &options.refine[..]);
     let t = Instant::now();
-    let (obs, mut solution, direct) = match (first, solver) {
-        (First::Spectral(s), Some(solver)) => {
-            estimator::surfaces_from_frames(solver, &s.maps, station, opts, options.estimator)?
-        }
-        (First::Spectral(s), None) => {
-            let cov = s.maps.screen_cov();
-            let obs =
-                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?;
-            let sol = solve_surfaces(&obs, station, opts)?;
-            (obs, sol, None)
-        }
-        (First::Points(p), _) => {
-            let obs = Observations::from_maps(station, &p.coords, p.uncertainty())?;
-            let sol = solve_surfaces(&obs, station, opts)?;
-            (obs, sol, None)
-        }
-    };
+    let (obs, mut solution, direct) = first_surfaces(first, solver, station, opts, options)?;
     let refined = match uncertainty {
         Some(u) if !refine.is_empty() => {
             let r = refine_station(&obs, station, u, refine, &solution, opts)?;
@@ -443,16 +353,14 @@ fn surface_stage(
         Some(u) => Some(budget(&obs, station, u, &solution, opts)?),
         None => None,
     };
-    let mut summary = Summary::new(&obs, &solution, t.elapsed().as_secs_f64());
-    if let Some(b) = &budget {
-        summary = summary.with_budget(b);
-    }
-    if let Some(r) = &refined {
-        summary = summary.with_refined(r);
-    }
-    if let Some(d) = &direct {
-        summary = summary.with_direct(d);
-    }
+    let mut summary = stage_summary(
+        &obs,
+        &solution,
+        t.elapsed().as_secs_f64(),
+        budget.as_ref(),
+        refined.as_ref(),
+        direct.as_ref(),
+    );
     let withheld = withheld(&summary, direct.as_ref(), options.max_expected_nm);
     summary.withheld = withheld.clone();
     Ok(SurfaceStage {
@@ -463,6 +371,59 @@ fn surface_stage(
         direct,
         withheld,
     })
+}
+
+/// The surfaces as first solved on the station given: from the frames by
+/// the estimator asked for where a solver holds them, else from the
+/// spectral maps' points or the screen points given.
+fn first_surfaces(
+    first: &First,
+    solver: Option<&SpectralSolver>,
+    station: &Station,
+    opts: &SurfaceOptions,
+    options: &Options,
+) -> Result<(Observations, SurfaceSolution, Option<DirectReport>), SurfaceError> {
+    Ok(match (first, solver) {
+        (First::Spectral(s), Some(solver)) => {
+            estimator::surfaces_from_frames(solver, &s.maps, station, opts, options.estimator)?
+        }
+        (First::Spectral(s), None) => {
+            let cov = s.maps.screen_cov();
+            let obs =
+                Observations::from_maps(station, &s.maps.screen_coords(), Uncertainty::Cov(&cov))?;
+            let sol = solve_surfaces(&obs, station, opts)?;
+            (obs, sol, None)
+        }
+        (First::Points(p), _) => {
+            let obs = Observations::from_maps(station, &p.coords, p.uncertainty())?;
+            let sol = solve_surfaces(&obs, station, opts)?;
+            (obs, sol, None)
+        }
+    })
+}
+
+/// The summary of `solution`, solved from `obs` in `seconds`, with the
+/// station's part of `budget`, the estimates of `refined` and the account
+/// of the surface-domain fit, where each exists.
+fn stage_summary(
+    obs: &Observations,
+    solution: &SurfaceSolution,
+    seconds: f64,
+    budget: Option<&Budget>,
+    refined: Option<&Refined>,
+    direct: Option<&DirectReport>,
+) -> Summary {
+    let mut summary = Summary::new(obs, solution, seconds);
+    if let Some(b) = budget {
+        summary = summary.with_budget(b);
+    }
+    if let Some(r) = refined {
+        summary = summary.with_refined(r);
+    }
+    if let Some(d) = direct {
+        summary = summary.with_direct(d);
+    }
+    summary
 }
 
 /// [`crate::budget::refine::refine`] with the solution's numbers of terms
@@ -527,163 +488,4 @@ fn spectral_stage(
         solve_s: t.elapsed().as_secs_f64(),
         consistency,
     })
-}
-
-impl Reconstruction {
-    /// Writes every result that exists into `out` (created if needed): the
-    /// spectral maps (`screen_coords.npy` and the quality maps), and for a
-    /// surface solution `surfaces.json`, `{front,back}_height_nm.npy`, the
-    /// pictures and `summary.json`. Returns the files written.
-    ///
-    /// # Errors
-    /// [`PipelineError`] naming the file that could not be written.
-    pub fn write(&self, out: &Path) -> Result<Vec<PathBuf>, PipelineError> {
-        std::fs::create_dir_all(out).map_err(|source| PipelineError::Io {
-            path: out.to_path_buf(),
-            source,
-        })?;
-        let mut written = Vec::new();
-        let inputs = self.inputs.clone().unwrap_or_default();
-        let path = out.join(result_dir::INPUTS_FILE);
-        write_json(&path, &inputs)?;
-        written.push(path);
-        if let Some(s) = &self.spectral {
-            s.maps.write(out)?;
-            written.push(out.join("screen_coords.npy"));
-            let path = out.join("consistency.json");
-            write_json(&path, &s.consistency)?;
-            written.push(path);
-        }
-        if let Some(Ok(stage)) = &self.surfaces {
-            let mut summary = stage.summary.clone();
-            summary.inputs = self.inputs.clone();
-            written.extend(write_surfaces(out, stage, &summary)?);
-        }
-        Ok(written)
-    }
-}
-
-/// The surface stage's files in `out`.
-fn write_surfaces(
-    out: &Path,
-    stage: &SurfaceStage,
-    summary: &Summary,
-) -> Result<Vec<PathBuf>, PipelineError> {
-    let sol = &stage.solution;
-    let mut written = vec![out.join("surfaces.json")];
-    surfaces_file(stage).save(&written[0])?;
-    if let Some(r) = &stage.refined {
-        // The refined station and its uncertainty, for the next measurement.
-        let path = out.join("station_refined.toml");
-        r.station.save(&path)?;
-        written.push(path);
-        let path = out.join("station_refined_uncertainty.toml");
-        let mut unc = r.uncertainty.clone();
-        unc.station = "station_refined.toml".into();
-        unc.save(&path)?;
-        written.push(path);
-    }
-    if let Some(d) = &stage.direct {
-        // The surface-domain fit's per-pixel maps: the points its surfaces
-        // predict, and each pixel's pull against them (a defect the
-        // Zernike model cannot follow shows there).
-        let (w, h) = (d.width, d.chi2_map.len() / d.width.max(1));
-        let path = out.join("direct_screen_coords.npy");
-        npy::write_f64(&path, &[h, w, 2, 2], &d.predicted)?;
-        written.push(path);
-        let path = out.join("direct_chi2.npy");
-        npy::write_f64(&path, &[h, w], &d.chi2_map)?;
-        written.push(path);
-    }
-    // A withheld surface gets no height map or picture.
-    let mut surfaces = Vec::new();
-    if stage.withheld[0].is_none() {
-        surfaces.push(("front", &sol.front, &summary.front));
-    }
-    if let Some(back) = summary
-        .back
-        .as_ref()
-        .filter(|_| stage.withheld[1].is_none())
-    {
-        surfaces.push(("back", &sol.back, back));
-    }
-    for (name, surface, figures) in surfaces {
-        let grid = height_grid(surface, HEIGHT_GRID);
-        let path = out.join(format!("{name}_height_nm.npy"));
-        npy::write_f64(&path, &[HEIGHT_GRID, HEIGHT_GRID], &grid)?;
-        written.push(path);
-        written.push(pictures::surface(
-            out,
-            name,
-            surface,
-            &grid,
-            HEIGHT_GRID,
-            figures,
-        )?);
-        let back = name == "back";
-        let total = summary
-            .station
-            .as_ref()
-            .and_then(|s| {
-                if back {
-                    s.back.as_ref()
-                } else {
-                    Some(&s.front)
-                }
-            })
-            .map(|s| &s.total_std_nm[..]);
-        written.extend(pictures::coefficients(out, name, figures, total)?);
-    }
-    written.extend(pictures::breakdown(out, summary)?);
-    let path = out.join("summary.json");
-    write_json(&path, summary)?;
-    written.push(path);
-    Ok(written)
-}
-
-/// `value` as pretty JSON in `path`.
-fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), PipelineError> {
-    let text = serde_json::to_string_pretty(value).map_err(|source| PipelineError::Json {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    std::fs::write(path, text + "\n").map_err(|source| PipelineError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
-/// Why the back is absent from `surfaces.json` when it was not fitted.
-pub const BACK_NOT_RECONSTRUCTED: &str = "no back reflection was measured (no camera pixel \
-had a point S2 from the back surface)";
-
-/// `surfaces.json` (`mfd-surfaces/2`) of a surface stage: per surface the
-/// coefficients, their 1σ of everything known (noise, and the station's
-/// part where a station uncertainty was used) and the expected RMS error;
-/// a back that was not reconstructed says why.
-pub fn surfaces_file(stage: &SurfaceStage) -> SurfacesFile {
-    let (sol, summary) = (&stage.solution, &stage.summary);
-    let entry = |surface: &crate::optics::zernike::ZernikeSurface, back: bool| {
-        let (std, expected) = summary
-            .reported(back)
-            .map_or((None, None), |(s, e)| (Some(s.to_vec()), Some(e)));
-        SurfaceEntry::Reconstructed(SurfaceCoefficients {
-            coefficients_nm: surface.coefficients_nm().to_vec(),
-            std_nm: std,
-            expected_error_rms_nm: expected,
-        })
-    };
-    let not = |because: &str| SurfaceEntry::NotReconstructed {
-        because: Some(because.into()),
-    };
-    let front = match &stage.withheld[0] {
-        Some(why) => not(why),
-        None => entry(&sol.front, false),
-    };
-    let back = match (&stage.withheld[1], sol.back_fitted) {
-        (_, false) => not(BACK_NOT_RECONSTRUCTED),
-        (Some(why), true) => not(why),
-        (None, true) => entry(&sol.back, true),
-    };
-    SurfacesFile::v2(ZernikeSpec::of(sol.front.basis()), front, back)
 }

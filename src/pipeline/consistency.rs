@@ -159,34 +159,74 @@ pub fn check(
     let alias_spacing_px = alias_spacing(station, design);
     let allowed_px = allowed_spread(station, prior, limits);
     // Displacements from the prediction, per reflection.
-    // (pixel, displacement, its own σ) per reflection.
-    let displacement = |maps: &SpectralMaps, r: usize| -> Vec<(usize, [f64; 2], f64)> {
-        maps.pixels
-            .iter()
-            .enumerate()
-            .filter_map(|(k, p)| {
-                let hit = if r == 0 {
-                    prior.pixels.get(k)?.front.as_ref().ok()?
-                } else {
-                    prior.pixels.get(k)?.back.as_ref().ok()?
-                };
-                let s = p.s[r];
-                let sigma = p.std[r][0].hypot(p.std[r][1]);
-                (s[0].is_finite() && s[1].is_finite())
-                    .then(|| (k, [s[0] - hit.u, s[1] - hit.v], sigma))
-            })
-            .collect()
+    let front = displacements(maps, prior, 0);
+    let back = displacements(maps, prior, 1);
+    let m_front = median_displacement(&front);
+    let m_back = median_displacement(&back);
+    let far_pixels = flag_far(maps, [(&front, m_front), (&back, m_back)], allowed_px);
+    let pixels = front.len();
+    let tested = pixels >= MIN_TESTED_PIXELS;
+    let size = |m: [f64; 2]| m[0].hypot(m[1]);
+    let worst = m_front.map_or(0.0, size).max(m_back.map_or(0.0, size));
+    let far_share = far_pixels as f64 / pixels.max(1) as f64;
+    let consistent = !tested || (worst <= allowed_px && far_share <= 0.5);
+    let mut c = Consistency {
+        consistent,
+        tested,
+        pixels,
+        median_displacement_px: m_front,
+        median_back_displacement_px: m_back,
+        allowed_px,
+        max_departure_nm: limits.max_departure_nm,
+        far_pixels,
+        poor_fit_pixels,
+        alias_spacing_px,
+        note: String::new(),
     };
-    let front = displacement(maps, 0);
-    let back = displacement(maps, 1);
-    let median_of = |d: &[(usize, [f64; 2], f64)]| -> Option<[f64; 2]> {
-        (!d.is_empty())
-            .then(|| [0, 1].map(|c| median(&mut d.iter().map(|x| x.1[c]).collect::<Vec<_>>())))
-    };
-    let m_front = median_of(&front);
-    let m_back = median_of(&back);
+    c.note = note(&c, worst, far_share);
+    c
+}
+
+/// A measured point's displacement from the prediction: (pixel,
+/// displacement in screen px, the point's own σ).
+type Displacement = (usize, [f64; 2], f64);
+
+/// The displacement of every pixel's measured point of reflection `r`
+/// (0 front, 1 back) from its predicted one.
+fn displacements(maps: &SpectralMaps, prior: &TracedView, r: usize) -> Vec<Displacement> {
+    maps.pixels
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| {
+            let hit = if r == 0 {
+                prior.pixels.get(k)?.front.as_ref().ok()?
+            } else {
+                prior.pixels.get(k)?.back.as_ref().ok()?
+            };
+            let s = p.s[r];
+            let sigma = p.std[r][0].hypot(p.std[r][1]);
+            (s[0].is_finite() && s[1].is_finite()).then(|| (k, [s[0] - hit.u, s[1] - hit.v], sigma))
+        })
+        .collect()
+}
+
+/// The per-component median of `d`; `None` when empty.
+fn median_displacement(d: &[Displacement]) -> Option<[f64; 2]> {
+    (!d.is_empty())
+        .then(|| [0, 1].map(|c| median(&mut d.iter().map(|x| x.1[c]).collect::<Vec<_>>())))
+}
+
+/// [`PixelFlags::FAR_FROM_PRIOR`] (points set to NaN) on every pixel whose
+/// front or back point lies farther from its reflection's median
+/// displacement than `allowed_px` plus [`FAR_SIGMAS`] of its own σ;
+/// returns how many.
+fn flag_far(
+    maps: &mut SpectralMaps,
+    reflections: [(&[Displacement], Option<[f64; 2]>); 2],
+    allowed_px: f64,
+) -> usize {
     let mut far = vec![false; maps.pixels.len()];
-    for (d, m) in [(&front, m_front), (&back, m_back)] {
+    for (d, m) in reflections {
         let Some(m) = m else { continue };
         for (k, x, sigma) in d {
             // The spread the scene allows plus the pixel's own noise at
@@ -209,31 +249,35 @@ pub fn check(
             far_pixels += 1;
         }
     }
-    let pixels = front.len();
-    let tested = pixels >= MIN_TESTED_PIXELS;
-    let size = |m: [f64; 2]| m[0].hypot(m[1]);
-    let worst = m_front.map_or(0.0, size).max(m_back.map_or(0.0, size));
-    let far_share = far_pixels as f64 / pixels.max(1) as f64;
-    let consistent = !tested || (worst <= allowed_px && far_share <= 0.5);
-    let aliases = match alias_spacing_px {
-        Some(d) if far_pixels > 0 || !consistent => format!(
+    far_pixels
+}
+
+/// The global test in words: untested, agreeing or contradicting (`worst`
+/// the larger median displacement, `far_share` the share of pixels far
+/// from the prediction), and the schedule's alias spacing where a pixel
+/// was far or the result contradicts the station.
+fn note(c: &Consistency, worst: f64, far_share: f64) -> String {
+    let (pixels, allowed_px, far_pixels) = (c.pixels, c.allowed_px, c.far_pixels);
+    let poor_fit_pixels = c.poor_fit_pixels;
+    let aliases = match c.alias_spacing_px {
+        Some(d) if far_pixels > 0 || !c.consistent => format!(
             "; this schedule repeats every screen point {d:.0} px away (its τ spacing), so a \
              fit can lock onto a copy: a schedule without aliases on the screen (finer τ \
              steps, mfd plan) avoids it"
         ),
         _ => String::new(),
     };
-    let note = if !tested {
+    let note = if !c.tested {
         format!(
             "not tested: {pixels} pixels with a measured front point (needs {MIN_TESTED_PIXELS})"
         )
-    } else if consistent {
+    } else if c.consistent {
         format!(
             "the screen points agree with the station: median displacement {worst:.2} px \
              from its flat-plate prediction, within the {allowed_px:.1} px that surfaces of up \
              to {:.0} nm RMS and the station's tolerance allow; {far_pixels} pixels flagged \
              far from it, {poor_fit_pixels} with a residual far above the noise",
-            limits.max_departure_nm
+            c.max_departure_nm
         )
     } else {
         format!(
@@ -241,23 +285,11 @@ pub fn check(
              its flat-plate prediction (allowed {allowed_px:.1} px for surfaces of up to {:.0} \
              nm RMS and the station's tolerance), {:.0} % of {pixels} pixels far from it: a \
              wrong station file, τ scale or direction label in the manifest?",
-            limits.max_departure_nm,
+            c.max_departure_nm,
             100.0 * far_share
         )
     };
-    Consistency {
-        consistent,
-        tested,
-        pixels,
-        median_displacement_px: m_front,
-        median_back_displacement_px: m_back,
-        allowed_px,
-        max_departure_nm: limits.max_departure_nm,
-        far_pixels,
-        poor_fit_pixels,
-        alias_spacing_px,
-        note: note + &aliases,
-    }
+    note + &aliases
 }
 
 /// The shortest distance to a false maximum of the schedule's ambiguity
@@ -368,163 +400,4 @@ mod tests {
 }
 
 #[cfg(test)]
-mod scene_tests {
-    //! Case 6 of issue 19 on maps built from the independent fixture's
-    //! station: every pixel measured at its flat-plate prediction with
-    //! noise, then some pixels given an alias (30–100 px off) or a residual
-    //! 25× the noise. Before this pass both were reported as found.
-    use super::*;
-    use crate::solve::spectral::{flat_plate_prior, PixelResult};
-    use rand::{Rng, SeedableRng};
-    use rand_distr::StandardNormal;
-
-    /// The paper's kind of schedule: τ 0.5…100 step 0.5, both diagonals.
-    fn design(station: &Station) -> Design {
-        let frames = crate::acquire::acquisition::FrameInfo::from_patterns(
-            &crate::acquire::patterns::Schedule {
-                directions_deg: vec![45.0, -45.0],
-                tau_start: 0.5,
-                tau_stop: 100.0,
-                tau_step: 0.5,
-                phases_rad: vec![0.0],
-            }
-            .patterns(),
-        );
-        crate::solve::spectral::design(station, &frames).unwrap()
-    }
-
-    fn scene() -> (Station, TracedView, SpectralMaps) {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/fixtures/public-small/station.toml");
-        let station = Station::load(&path).unwrap();
-        let prior = flat_plate_prior(&station, 0.0).unwrap();
-        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(19);
-        let sigma = 0.25;
-        let pixels = prior
-            .pixels
-            .iter()
-            .map(|p| {
-                let mut r = PixelResult::empty();
-                let (Ok(f), Ok(b)) = (p.front, p.back) else {
-                    return r;
-                };
-                for (i, hit) in [f, b].iter().enumerate() {
-                    let n: [f64; 2] = [rng.sample(StandardNormal), rng.sample(StandardNormal)];
-                    r.s[i] = [hit.u + sigma * n[0], hit.v + sigma * n[1]];
-                    r.std[i] = [sigma, sigma];
-                }
-                // Shot noise: variance 1 + A/100 counts², A 50…250.
-                let a: f64 = rng.random_range(50.0..250.0);
-                let var = 1.0 + a / 100.0;
-                let chi2: f64 = (0..400)
-                    .map(|_| rng.sample::<f64, _>(StandardNormal).powi(2))
-                    .sum::<f64>()
-                    / 400.0;
-                r.amp = [a, 30.0, 20.0, f64::NAN];
-                r.residual_rms = (var * chi2).sqrt();
-                r.model = 2;
-                r
-            })
-            .collect();
-        let maps = SpectralMaps {
-            width: prior.width,
-            height: prior.pixels.len() / prior.width,
-            pixels,
-            preferred: Vec::new(),
-            scene_model: 2,
-            bic_sums: [0.0; 3],
-            saturation_counts: None,
-        };
-        (station, prior, maps)
-    }
-
-    #[test]
-    fn aliases_and_fits_far_above_the_noise_are_flagged_and_good_pixels_kept() {
-        let (station, prior, mut maps) = scene();
-        let measured: Vec<usize> = (0..maps.pixels.len())
-            .filter(|&k| maps.pixels[k].s[0][0].is_finite())
-            .collect();
-        assert!(measured.len() > 500, "{}", measured.len());
-        // Every 20th measured pixel on an alias 30–100 px away, every 20th
-        // (offset by 10) with a residual 25× the noise.
-        let (mut aliased, mut poor) = (Vec::new(), Vec::new());
-        for (i, &k) in measured.iter().enumerate() {
-            let p = &mut maps.pixels[k];
-            if i % 20 == 0 {
-                let d = 30.0 + 70.0 * (i as f64 / measured.len() as f64);
-                p.s[0][0] += d;
-                aliased.push(k);
-            } else if i % 20 == 10 {
-                p.residual_rms *= 25.0;
-                poor.push(k);
-            }
-        }
-        let c = check(
-            &mut maps,
-            &prior,
-            &station,
-            &design(&station),
-            Limits::default(),
-        );
-        for &k in &aliased {
-            assert!(
-                maps.pixels[k].flags.contains(PixelFlags::FAR_FROM_PRIOR),
-                "pixel {k}"
-            );
-            assert!(maps.pixels[k].s[0][0].is_nan());
-        }
-        for &k in &poor {
-            assert!(
-                maps.pixels[k].flags.contains(PixelFlags::POOR_FIT),
-                "pixel {k}"
-            );
-        }
-        // Good pixels: none lost (5σ plus the spread; a χ² tail of 1e-15).
-        let lost = measured
-            .iter()
-            .filter(|k| !aliased.contains(k) && !poor.contains(k))
-            .filter(|&&k| maps.pixels[k].s[0][0].is_nan())
-            .count();
-        assert_eq!(lost, 0);
-        assert_eq!(c.far_pixels, aliased.len());
-        assert_eq!(c.poor_fit_pixels, poor.len());
-        assert!(c.consistent, "{}", c.note);
-    }
-
-    #[test]
-    fn a_global_shift_beyond_the_spread_is_inconsistent_and_flags_no_pixel() {
-        let (station, prior, mut maps) = scene();
-        // Every point 40 px off: a wrong station, not 40 bad pixels.
-        for p in &mut maps.pixels {
-            p.s[0][0] += 40.0;
-            p.s[1][0] += 40.0;
-        }
-        let c = check(
-            &mut maps,
-            &prior,
-            &station,
-            &design(&station),
-            Limits::default(),
-        );
-        assert!(!c.consistent, "{}", c.note);
-        assert_eq!(c.far_pixels, 0);
-        assert!(
-            (c.median_displacement_px.unwrap()[0] - 40.0).abs() < 0.1,
-            "{c:?}"
-        );
-        assert!(c.note.contains("contradict"), "{}", c.note);
-        // Within the spread: consistent.
-        let (station, prior, mut maps) = scene();
-        for p in &mut maps.pixels {
-            p.s[0][0] += 1.0;
-        }
-        let c = check(
-            &mut maps,
-            &prior,
-            &station,
-            &design(&station),
-            Limits::default(),
-        );
-        assert!(c.consistent, "{}", c.note);
-    }
-}
+mod scene_tests;
