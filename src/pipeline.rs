@@ -21,7 +21,9 @@ use crate::formats::surfaces_file::SurfacesFileError;
 use crate::optics::station::{Dof, Station, StationUncertainty, UncertaintyError};
 use crate::plot::PlotError;
 use crate::report::summary::Summary;
-use crate::solve::spectral::{SpectralConfig, SpectralError, SpectralMaps, SpectralSolver};
+use crate::solve::spectral::{
+    FeedError, SpectralConfig, SpectralError, SpectralMaps, SpectralSolver,
+};
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
     Uncertainty,
@@ -286,15 +288,12 @@ fn read_acquisition(
     acq.check_resolution(station.camera.width, station.camera.height)?;
     let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
     let total = acq.frames().len();
-    let mut frame = Vec::new();
-    let mut max_count = 0u16;
-    for k in 0..total {
-        let index = acq.frames()[k].index;
-        acq.read_frame(index, &mut frame)?;
-        max_count = frame.iter().copied().fold(max_count, u16::max);
-        solver.push_frame(index, &frame)?;
-        progress(k + 1, total);
-    }
+    let max_count = solver
+        .push_acquisition(acq, total, progress)
+        .map_err(|e| match e {
+            FeedError::Read(e) => PipelineError::from(e),
+            FeedError::Push(e) => PipelineError::from(e),
+        })?;
     let stage = spectral_stage(
         &mut solver,
         station,

@@ -342,18 +342,13 @@ pub fn expected_surfaces(
     path: Option<&Path>,
     station: &Station,
 ) -> Result<(ZernikeSurface, ZernikeSurface), BudgetError> {
-    use crate::formats::surfaces_file::{to_surface, SurfacesFile};
-    let e = &station.element;
-    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
-    let Some(path) = path else {
-        let flat = ZernikeSurface::flat(e.aperture_radius_mm, centre)?;
-        return Ok((flat.clone(), flat));
-    };
-    let file = SurfacesFile::load(path)?;
-    Ok((
-        to_surface(&file, file.front_coefficients())?,
-        to_surface(&file, file.back_coefficients())?,
-    ))
+    use crate::formats::surfaces_file::{surfaces_or_flat, SurfacesOrFlatError};
+    surfaces_or_flat(path, station).map_err(|e| match e {
+        SurfacesOrFlatError::File(e) => BudgetError::from(e),
+        SurfacesOrFlatError::Build { source, .. } | SurfacesOrFlatError::Flat(source) => {
+            BudgetError::from(source)
+        }
+    })
 }
 
 /// The uncertainty of the file (if any) with per-degree-of-freedom 1σ

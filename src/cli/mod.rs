@@ -23,8 +23,6 @@ pub mod tradeoff;
 
 use std::path::Path;
 
-use anyhow::Context;
-use mfd::formats::surfaces_file::SurfacesFile;
 use mfd::optics::station::Station;
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::solve::spectral::Engine;
@@ -35,21 +33,9 @@ pub fn load_surfaces(
     path: Option<&Path>,
     station: &Station,
 ) -> anyhow::Result<(ZernikeSurface, ZernikeSurface)> {
-    let e = &station.element;
-    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
-    let Some(path) = path else {
-        let flat = ZernikeSurface::flat(e.aperture_radius_mm, centre)?;
-        return Ok((flat.clone(), flat));
-    };
-    let file = SurfacesFile::load(path)?;
-    let make = |coeffs: Option<&Vec<f64>>| -> anyhow::Result<ZernikeSurface> {
-        mfd::formats::surfaces_file::to_surface(&file, coeffs)
-            .with_context(|| format!("{}: building the Zernike surface", path.display()))
-    };
-    Ok((
-        make(file.front_coefficients())?,
-        make(file.back_coefficients())?,
-    ))
+    Ok(mfd::formats::surfaces_file::surfaces_or_flat(
+        path, station,
+    )?)
 }
 
 /// How the spectral stage keeps and fits the pixels' data: the options

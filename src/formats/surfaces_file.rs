@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize};
 
+use crate::optics::station::Station;
 use crate::optics::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
 
 mod validate;
@@ -341,6 +342,57 @@ pub fn to_surface(
         ),
         None => ZernikeSurface::flat(z.radius_mm, z.center_mm),
     }
+}
+
+/// Why [`surfaces_or_flat`] gave no surfaces.
+#[derive(Debug, thiserror::Error)]
+pub enum SurfacesOrFlatError {
+    /// The file could not be read or is not valid.
+    #[error(transparent)]
+    File(#[from] SurfacesFileError),
+    /// A surface of the file could not be built.
+    #[error("{path}: building the Zernike surface")]
+    Build {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: ZernikeError,
+    },
+    /// The flat surfaces over the station's aperture could not be built.
+    #[error("flat surfaces over the station's aperture")]
+    Flat(#[source] ZernikeError),
+}
+
+/// Front and back surfaces from a `surfaces.json` (`mfd-surfaces/1` or
+/// `/2`; a `null` surface is flat), or flat surfaces over the station's
+/// aperture when none is given: the expected surfaces of a simulation, a
+/// trace or a budget.
+///
+/// # Errors
+/// [`SurfacesOrFlatError`]: the file, one of its surfaces, or the flat.
+pub fn surfaces_or_flat(
+    path: Option<&Path>,
+    station: &Station,
+) -> Result<(ZernikeSurface, ZernikeSurface), SurfacesOrFlatError> {
+    let e = &station.element;
+    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
+    let Some(path) = path else {
+        let flat = ZernikeSurface::flat(e.aperture_radius_mm, centre)
+            .map_err(SurfacesOrFlatError::Flat)?;
+        return Ok((flat.clone(), flat));
+    };
+    let file = SurfacesFile::load(path)?;
+    let make = |coefficients: Option<&Vec<f64>>| {
+        to_surface(&file, coefficients).map_err(|source| SurfacesOrFlatError::Build {
+            path: path.to_path_buf(),
+            source,
+        })
+    };
+    Ok((
+        make(file.front_coefficients())?,
+        make(file.back_coefficients())?,
+    ))
 }
 
 #[cfg(test)]
