@@ -149,26 +149,51 @@ struct FaultArgs {
 pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
     #[cfg(feature = "display")]
     if args.display != "offscreen" {
-        return on_monitor(args);
+        return on_monitor(args, StationInput::load(&args.station)?);
     }
-    let station = Station::load(&args.station)?;
-    let display = open_display(&args.display, &station, args.settle_ms, args.gamma)?;
-    run_with(args, display)
+    let station = StationInput::load(&args.station)?;
+    let display = open_display(&args.display, &station.station, args.settle_ms, args.gamma)?;
+    run_with(args, &station, display)
+}
+
+/// The station file, read once: the station, and the SHA-256 of the very
+/// bytes it was parsed from, for the acquisition's setup and the result's
+/// inputs.
+#[derive(Clone)]
+pub(super) struct StationInput {
+    /// The station.
+    pub station: Station,
+    /// SHA-256 of the file's bytes, lower-case hex.
+    pub sha256: String,
+}
+
+impl StationInput {
+    fn load(path: &std::path::Path) -> anyhow::Result<Self> {
+        let (station, bytes) = Station::load_with_bytes(path)?;
+        Ok(Self {
+            station,
+            sha256: sha256_hex(&bytes),
+        })
+    }
 }
 
 /// The measurement on `display`: the schedule's patterns shown and
 /// recorded as they arrive, then the reconstruction; with `--serve`, the
 /// console beside it.
-fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow::Result<()> {
-    let station = Station::load(&args.station)?;
+fn run_with(
+    args: &MeasureArgs,
+    input: &StationInput,
+    display: Box<dyn PatternDisplay + '_>,
+) -> anyhow::Result<()> {
+    let station = &input.station;
     let patterns = args
         .schedule
-        .patterns(args.schedule_file.as_deref(), &station)?;
+        .patterns(args.schedule_file.as_deref(), station)?;
     let devices::Opened {
         camera,
         display,
         camera_config,
-    } = open_camera(args, &station, display)?;
+    } = open_camera(args, station, display)?;
     let start = if args.resume {
         Start::Resume
     } else {
@@ -183,11 +208,9 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
         capacity: args.ring,
     };
     let dir = args.out.join("acquisition");
-    let station_bytes = std::fs::read(&args.station)
-        .with_context(|| format!("reading {}", args.station.display()))?;
     let prepared = Prepared {
-        station: &station,
-        station_sha256: &sha256_hex(&station_bytes),
+        station,
+        station_sha256: &input.sha256,
         patterns,
         camera_config,
         dir: &dir,
@@ -203,7 +226,7 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
         Some(addr) => Some(serve_measurement(
             addr,
             args,
-            &station,
+            station,
             &stop,
             &mut measurement,
         )?),
@@ -218,7 +241,7 @@ fn run_with(args: &MeasureArgs, display: Box<dyn PatternDisplay + '_>) -> anyhow
     summarise(&report, &measurement);
     let outcome = finish(
         args,
-        &station,
+        input,
         &report,
         &mut measurement,
         t0.elapsed().as_secs_f64(),

@@ -16,9 +16,9 @@ use super::MeasureArgs;
 
 /// The measurement on monitor `--display N` (an index of `mfd display --list`).
 #[cfg(feature = "display")]
-pub(super) fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
+pub(super) fn on_monitor(args: &MeasureArgs, input: super::StationInput) -> anyhow::Result<()> {
     use mfd::acquire::display::window::{run_fullscreen, WindowConfig, WindowDisplay};
-    let station = Station::load(&args.station)?;
+    let station = &input.station;
     let monitor: usize = args.display.parse().with_context(|| {
         format!(
             "--display {}: expected `offscreen` or a monitor index from `mfd display --list`",
@@ -52,7 +52,7 @@ pub(super) fn on_monitor(args: &MeasureArgs) -> anyhow::Result<()> {
     }
     let args = args.clone();
     run_fullscreen(config, move |window: &mut WindowDisplay| {
-        super::run_with(&args, Box::new(Borrowed(window))).map_err(|e| format!("{e:#}"))
+        super::run_with(&args, &input, Box::new(Borrowed(window))).map_err(|e| format!("{e:#}"))
     })?
     .map_err(anyhow::Error::msg)
 }

@@ -13,7 +13,7 @@ use super::MeasureArgs;
 /// the recorded frames (unless `--no-reconstruct`) written with its report.
 pub(super) fn finish(
     args: &MeasureArgs,
-    station: &Station,
+    input: &super::StationInput,
     report: &Report,
     measurement: &mut Measurement<'_>,
     acquire_s: f64,
@@ -25,6 +25,7 @@ pub(super) fn finish(
     let Some(solver) = measurement.solver_mut() else {
         return Ok(());
     };
+    let station = &input.station;
     let options = options(args, station)?;
     let mut fitting = |done: usize, total: usize| {
         if let Some(s) = served {
@@ -42,7 +43,7 @@ pub(super) fn finish(
         }
     }
     let result = args.out.join("result");
-    rec.inputs = Some(inputs(args));
+    rec.inputs = Some(inputs(args, &input.sha256));
     super::super::output::write_and_print(&rec, &result, &args.checks)?;
     // The acquisition holds a copy of the station: the calibration is
     // where --station came from.
@@ -106,8 +107,9 @@ fn options(args: &MeasureArgs, station: &Station) -> anyhow::Result<Options> {
     Ok(options)
 }
 
-/// The result's inputs: the acquisition (its manifest's hash) and the station.
-fn inputs(args: &MeasureArgs) -> mfd::pipeline::Inputs {
+/// The result's inputs: the acquisition (its manifest's hash) and the
+/// station (the digest of the bytes it was read from).
+fn inputs(args: &MeasureArgs, station_sha256: &str) -> mfd::pipeline::Inputs {
     let mut inputs = mfd::pipeline::Inputs::new();
     let manifest = args
         .out
@@ -120,6 +122,9 @@ fn inputs(args: &MeasureArgs) -> mfd::pipeline::Inputs {
                 path: args.out.join("acquisition").display().to_string(),
                 sha256: m.sha256,
             });
-    inputs.station = mfd::pipeline::InputFile::of(&args.station).ok();
+    inputs.station = Some(mfd::pipeline::InputFile {
+        path: args.station.display().to_string(),
+        sha256: station_sha256.to_string(),
+    });
     inputs
 }

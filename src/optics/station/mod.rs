@@ -266,11 +266,27 @@ impl Station {
     /// # Errors
     /// [`StationError`] naming the file and, for bad values, the field.
     pub fn load(path: &Path) -> Result<Self, StationError> {
-        let text = std::fs::read_to_string(path).map_err(|source| StationError::Io {
+        Ok(Self::load_with_bytes(path)?.0)
+    }
+
+    /// Reads and validates a `station.toml`, and gives back the bytes it was
+    /// parsed from: for a record of the file (its digest) that is certainly
+    /// of the station used, the file read once.
+    ///
+    /// # Errors
+    /// [`StationError`] naming the file and, for bad values, the field; a
+    /// file that is not UTF-8 is an [`StationError::Io`] of kind
+    /// `InvalidData`, as `read_to_string` reports it.
+    pub fn load_with_bytes(path: &Path) -> Result<(Self, Vec<u8>), StationError> {
+        let io = |source| StationError::Io {
             path: path.to_path_buf(),
             source,
-        })?;
-        Self::from_toml_str(&text, path)
+        };
+        let bytes = std::fs::read(path).map_err(io)?;
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|e| io(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
+        let station = Self::from_toml_str(text, path)?;
+        Ok((station, bytes))
     }
 
     /// Parses and validates station TOML; `path` is only used in errors.
