@@ -44,6 +44,7 @@ pub mod formats;
 pub mod kernels;
 pub mod live;
 pub mod optics;
+pub mod outcome;
 pub mod pipeline;
 pub mod plan;
 pub mod plot;

@@ -139,6 +139,16 @@ pub enum PipelineError {
     },
 }
 
+impl crate::outcome::Classify for PipelineError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            PipelineError::UncertaintyOfAnotherStation { .. } => Some(Outcome::Input),
+            _ => None,
+        }
+    }
+}
+
 /// What a reconstruction starts from.
 pub enum Input<'a> {
     /// An acquisition folder's frames, read in order.

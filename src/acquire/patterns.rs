@@ -30,6 +30,13 @@ pub enum ScheduleError {
     },
 }
 
+impl crate::outcome::Classify for ScheduleError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 /// One displayed pattern.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pattern {

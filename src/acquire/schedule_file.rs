@@ -46,6 +46,13 @@ pub enum ScheduleFileError {
     },
 }
 
+impl crate::outcome::Classify for ScheduleFileError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 /// The file as serde sees it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -144,6 +144,13 @@ pub enum SessionError {
     },
 }
 
+impl crate::outcome::Classify for SessionError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 impl SessionError {
     /// The entry the error is about (`target_point[7]`, `stage_std_um`), or
     /// `None` for errors of the whole file.

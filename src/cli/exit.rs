@@ -75,84 +75,40 @@ pub fn classify(err: &anyhow::Error) -> Class {
         .unwrap_or(Class::Failure)
 }
 
-/// The class of one of the library's errors, where its type (and variant)
-/// says it: bad input files and options → [`Class::Input`], nothing
-/// measurable → [`Class::NoSignal`], camera and display faults →
-/// [`Class::Device`]; `None` for the others (their causes decide).
+/// The class of one of the library's errors, as its type says it
+/// ([`mfd::outcome::Classify`], implemented beside each error's
+/// definition); `None` for the others and for variants whose cause
+/// decides. The list names the library's error types that have a class.
 fn library_class(e: &(dyn std::error::Error + 'static)) -> Option<Class> {
-    use mfd::acquire::acquisition::AcquisitionError;
-    use mfd::acquire::camera::CameraError;
-    use mfd::acquire::display::DisplayError;
-    use mfd::live::{LiveError, MeasurementError};
-    use mfd::solve::spectral::SpectralError;
-    use mfd::solve::surfaces::SurfaceError;
-    if let Some(e) = e.downcast_ref::<MeasurementError>() {
-        return match e {
-            MeasurementError::ResumeMismatch { .. } | MeasurementError::Resolution { .. } => {
-                Some(Class::Input)
-            }
-            _ => None,
+    use mfd::outcome::{Classify, Outcome};
+    /// The first of `types` that `e` is, asked for its outcome.
+    macro_rules! outcome_of {
+        ($($t:ty),+ $(,)?) => {
+            $(if let Some(e) = e.downcast_ref::<$t>() {
+                return e.outcome().map(|o| match o {
+                    Outcome::Input => Class::Input,
+                    Outcome::NoSignal => Class::NoSignal,
+                    Outcome::Device => Class::Device,
+                });
+            })+
         };
     }
-    if let Some(e) = e.downcast_ref::<LiveError>() {
-        return match e {
-            LiveError::Reshoots { .. } | LiveError::FrameSize { .. } => Some(Class::Device),
-            _ => None,
-        };
-    }
-    if let Some(e) = e.downcast_ref::<CameraError>() {
-        return Some(match e {
-            CameraError::NotBuilt { .. } => Class::Input,
-            _ => Class::Device,
-        });
-    }
-    if let Some(e) = e.downcast_ref::<DisplayError>() {
-        return Some(match e {
-            DisplayError::NotBuilt { .. } => Class::Input,
-            _ => Class::Device,
-        });
-    }
-    if let Some(e) = e.downcast_ref::<AcquisitionError>() {
-        return Some(match e {
-            AcquisitionError::Io { source, .. } if !is_missing(source) => Class::Failure,
-            AcquisitionError::Serialize { .. } => Class::Failure,
-            _ => Class::Input,
-        });
-    }
-    if let Some(e) = e.downcast_ref::<SurfaceError>() {
-        return match e {
-            SurfaceError::TooFewPoints { .. } => Some(Class::NoSignal),
-            SurfaceError::Input { .. } => Some(Class::Input),
-            _ => None,
-        };
-    }
-    if let Some(e) = e.downcast_ref::<SpectralError>() {
-        return match e {
-            SpectralError::Schedule { .. }
-            | SpectralError::Config { .. }
-            | SpectralError::Statistics { .. } => Some(Class::Input),
-            _ => None,
-        };
-    }
-    if let Some(mfd::pipeline::PipelineError::UncertaintyOfAnotherStation { .. }) =
-        e.downcast_ref::<mfd::pipeline::PipelineError>()
-    {
-        return Some(Class::Input);
-    }
-    let input = e.is::<mfd::optics::station::StationError>()
-        || e.is::<mfd::optics::station::UncertaintyError>()
-        || e.is::<mfd::acquire::schedule_file::ScheduleFileError>()
-        || e.is::<mfd::acquire::patterns::ScheduleError>()
-        || e.is::<mfd::formats::surfaces_file::SurfacesFileError>()
-        || e.is::<mfd::formats::image_io::ImageError>()
-        || e.is::<mfd::calibrate::session::SessionError>();
-    input.then_some(Class::Input)
-}
-
-/// Whether an I/O error is a path that is not there (an input named wrong).
-fn is_missing(e: &std::io::Error) -> bool {
-    matches!(
-        e.kind(),
-        std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied
-    )
+    outcome_of!(
+        mfd::live::MeasurementError,
+        mfd::live::LiveError,
+        mfd::acquire::camera::CameraError,
+        mfd::acquire::display::DisplayError,
+        mfd::acquire::acquisition::AcquisitionError,
+        mfd::solve::surfaces::SurfaceError,
+        mfd::solve::spectral::SpectralError,
+        mfd::pipeline::PipelineError,
+        mfd::optics::station::StationError,
+        mfd::optics::station::UncertaintyError,
+        mfd::acquire::schedule_file::ScheduleFileError,
+        mfd::acquire::patterns::ScheduleError,
+        mfd::formats::surfaces_file::SurfacesFileError,
+        mfd::formats::image_io::ImageError,
+        mfd::calibrate::session::SessionError,
+    );
+    None
 }

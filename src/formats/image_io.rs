@@ -40,6 +40,13 @@ pub enum ImageError {
     },
 }
 
+impl crate::outcome::Classify for ImageError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 /// A grayscale frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GrayImage {

@@ -59,6 +59,13 @@ pub enum SurfacesFileError {
     },
 }
 
+impl crate::outcome::Classify for SurfacesFileError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 /// The `zernike` block.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -82,6 +82,18 @@ pub enum MeasurementError {
     },
 }
 
+impl crate::outcome::Classify for MeasurementError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            MeasurementError::ResumeMismatch { .. } | MeasurementError::Resolution { .. } => {
+                Some(Outcome::Input)
+            }
+            _ => None,
+        }
+    }
+}
+
 /// How the acquisition folder is begun.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Start {

@@ -122,6 +122,16 @@ pub enum LiveError {
     },
 }
 
+impl crate::outcome::Classify for LiveError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            LiveError::Reshoots { .. } | LiveError::FrameSize { .. } => Some(Outcome::Device),
+            _ => None,
+        }
+    }
+}
+
 /// Settings of the sequencer.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SequencerConfig {

@@ -23,6 +23,7 @@ const FLOORS: &[(&str, u32)] = &[
     ("conventions", 0),
     ("kernels", 0),
     ("plot", 0),
+    ("outcome", 0),
     // Floor 1: the exact optics (station, Zernike surfaces, the tracer).
     ("optics", 1),
     // Floor 2: file formats of the optics' results.

@@ -92,6 +92,19 @@ pub enum AcquisitionError {
     },
 }
 
+impl crate::outcome::Classify for AcquisitionError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        // A file that cannot be written, or an I/O fault on one that is
+        // there, is not the input's fault: the cause decides (no class).
+        match self {
+            AcquisitionError::Io { source, .. } => crate::outcome::io_outcome(source),
+            AcquisitionError::Serialize { .. } => None,
+            _ => Some(Outcome::Input),
+        }
+    }
+}
+
 /// One frame's pattern.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameInfo {

@@ -74,3 +74,13 @@ pub enum CameraError {
         problem: String,
     },
 }
+
+impl crate::outcome::Classify for CameraError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(match self {
+            CameraError::NotBuilt { .. } => Outcome::Input,
+            _ => Outcome::Device,
+        })
+    }
+}

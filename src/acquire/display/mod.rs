@@ -75,6 +75,16 @@ pub enum DisplayError {
     Closed,
 }
 
+impl crate::outcome::Classify for DisplayError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(match self {
+            DisplayError::NotBuilt { .. } => Outcome::Input,
+            _ => Outcome::Device,
+        })
+    }
+}
+
 /// Something that shows fringe patterns. `Send`, so the sequencer can own it
 /// on its own thread; a window backend whose event loop must stay on the main
 /// thread implements this on a handle that talks to that loop.

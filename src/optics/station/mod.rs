@@ -65,6 +65,13 @@ pub enum StationError {
     },
 }
 
+impl crate::outcome::Classify for StationError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 /// A central-projection camera: a pinhole, with the lens's distortion
 /// where the station gives one.
 #[derive(Debug, Clone, PartialEq)]

@@ -48,6 +48,13 @@ pub enum UncertaintyError {
     },
 }
 
+impl crate::outcome::Classify for UncertaintyError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        Some(Outcome::Input)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct UncertaintyFile {

@@ -76,6 +76,18 @@ pub enum SpectralError {
     Npy(#[from] NpyError),
 }
 
+impl crate::outcome::Classify for SpectralError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            SpectralError::Schedule { .. }
+            | SpectralError::Config { .. }
+            | SpectralError::Statistics { .. } => Some(Outcome::Input),
+            _ => None,
+        }
+    }
+}
+
 /// How the solver keeps the pixels' data between frames and fit (also the
 /// command line's `--engine`: `auto`, `series`, `statistics` or `stats`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]

@@ -61,3 +61,14 @@ pub enum SurfaceError {
     #[error(transparent)]
     Zernike(#[from] ZernikeError),
 }
+
+impl crate::outcome::Classify for SurfaceError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            SurfaceError::TooFewPoints { .. } => Some(Outcome::NoSignal),
+            SurfaceError::Input { .. } => Some(Outcome::Input),
+            _ => None,
+        }
+    }
+}
