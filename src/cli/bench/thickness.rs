@@ -146,11 +146,7 @@ pub(super) fn render_and_solve(
         ..SpectralConfig::default()
     };
     let mut solver = SpectralSolver::new(station, &frames, config)?;
-    let mut buf = vec![0u16; station.camera.pixel_count()];
-    for (k, p) in patterns.iter().enumerate() {
-        cam.render(p, k as u64, &mut buf);
-        solver.push_frame(k, &buf)?;
-    }
+    solver.push_made(|k, buf| cam.render(&patterns[k], k as u64, buf))?;
     let maps = solver.solve()?;
     Ok((solver, maps, cam.gain()))
 }

@@ -58,16 +58,15 @@ pub(super) fn solve_frames(
         ..SpectralConfig::default()
     };
     let mut solver = SpectralSolver::new(station, frames, config)?;
-    let mut buf = vec![0u16; station.camera.pixel_count()];
-    for (k, f) in frames.iter().enumerate() {
+    solver.push_made(|k, buf| {
+        let f = &frames[k];
         let p = mfd::acquire::patterns::Pattern {
             direction_deg: f.direction_deg,
             tau: f.tau,
             phase_rad: f.phase_rad,
         };
-        cam.render(&p, k as u64, &mut buf);
-        solver.push_frame(k, &buf)?;
-    }
+        cam.render(&p, k as u64, buf);
+    })?;
     checked(solver, station)
 }
 

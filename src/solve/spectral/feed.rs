@@ -1,6 +1,7 @@
-//! Frames of a recorded acquisition fed into the spectral solver: the one
-//! loop that `pipeline::reconstruct`, the calibration's reference flat and
-//! a resumed live measurement share.
+//! Frames fed into the spectral solver from where they are kept: a
+//! recorded acquisition (the one loop that `pipeline::reconstruct`, the
+//! calibration's reference flat and a resumed live measurement share), or
+//! a source that makes them (a renderer: `mfd tradeoff`, the benches).
 
 use crate::acquire::acquisition::{Acquisition, AcquisitionError};
 
@@ -46,5 +47,24 @@ impl SpectralSolver {
             progress(k + 1, count);
         }
         Ok(max_count)
+    }
+
+    /// Pushes the schedule's frames in its order, each written by
+    /// `fill(k, frame)` into a buffer of the camera's pixel count and pushed
+    /// under index `k`.
+    ///
+    /// # Errors
+    /// [`SpectralError`] for a frame the solver refuses; the frames before
+    /// it stay pushed.
+    pub fn push_made(
+        &mut self,
+        mut fill: impl FnMut(usize, &mut [u16]),
+    ) -> Result<(), SpectralError> {
+        let mut frame = vec![0u16; self.width * self.height];
+        for k in 0..self.frames() {
+            fill(k, &mut frame);
+            self.push_frame(k, &frame)?;
+        }
+        Ok(())
     }
 }

@@ -29,8 +29,9 @@ const BLOCK: usize = 32;
 
 /// The streaming spectral solver of one acquisition.
 pub struct SpectralSolver {
-    width: usize,
-    height: usize,
+    /// The camera's resolution, pixels (`feed` sizes frames by it).
+    pub(super) width: usize,
+    pub(super) height: usize,
     design: Design,
     plans: SpectrumPlans,
     prior: GeometryPrior,
