@@ -255,7 +255,8 @@ pub(super) fn uses_in(src: &str, module_path: &[String], file: &Path, tops: &[&s
                         _ => {}
                     }
                 }
-                i = j;
+                // `pub(super)` names no path: step past it.
+                i = j.max(i + 1);
                 continue;
             }
             _ => {}
@@ -281,6 +282,7 @@ const S: &str = "crate::live::Measurement";
 fn f() { let _ = crate::solve::spectral::run(); let c = '}'; }
 mod tests {
     use super::*;
+    pub(super) fn g() {}
     use super::super::plan::Design;
     #[test]
     fn t() { let _ = super::super::super::report::Summary::default(); }
@@ -299,7 +301,7 @@ mod tests {
         ("acquire", 5),
         ("kernels", 6),
         ("solve", 9),
-        ("report", 14),
+        ("report", 15),
     ]
     .iter()
     .map(|(m, l)| (m.to_string(), *l))
