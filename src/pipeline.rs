@@ -11,19 +11,13 @@
 //! `mfd reconstruct`, `mfd measure`, the tests and any server call
 //! [`reconstruct`]; the command line only parses arguments and prints.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::acquire::acquisition::{Acquisition, AcquisitionError};
+use crate::acquire::acquisition::Acquisition;
 use crate::budget::Budget;
-use crate::formats::npy::NpyError;
-use crate::formats::surfaces_file::SurfacesFileError;
-use crate::optics::station::{Dof, Station, StationUncertainty, UncertaintyError};
-use crate::plot::PlotError;
+use crate::optics::station::{Dof, Station, StationUncertainty};
 use crate::report::summary::Summary;
-use crate::solve::spectral::{
-    FeedError, SpectralConfig, SpectralError, SpectralMaps, SpectralSolver,
-};
+use crate::solve::spectral::{FeedError, SpectralConfig, SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
     Uncertainty,
@@ -37,7 +31,10 @@ mod screen_points;
 mod station_uncertainty;
 
 pub use crate::solve::direct::DirectReport;
+mod error;
+
 pub use consistency::{Consistency, Limits, DEFAULT_MAX_DEPARTURE_NM};
+pub use error::PipelineError;
 pub use estimator::{surfaces_from_frames, withheld, Estimator};
 pub use result_dir::{InputFile, Inputs, Staged};
 pub use result_files::{surfaces_file, BACK_NOT_RECONSTRUCTED};
@@ -53,101 +50,6 @@ pub use station_uncertainty::{
 
 /// Side of the height-map grids written beside `surfaces.json`, pixels.
 pub const HEIGHT_GRID: usize = 256;
-
-/// Errors of the pipeline: which stage or file failed, with its cause.
-#[derive(Debug, thiserror::Error)]
-pub enum PipelineError {
-    /// Reading the acquisition failed.
-    #[error(transparent)]
-    Acquisition(#[from] AcquisitionError),
-    /// The spectral stage failed.
-    #[error(transparent)]
-    Spectral(#[from] SpectralError),
-    /// An NPY array could not be read or written.
-    #[error(transparent)]
-    Npy(#[from] NpyError),
-    /// An array does not fit the station.
-    #[error("{path}: shape {found:?}, expected {expected:?} ({what}) for the station's camera")]
-    Shape {
-        /// The file.
-        path: PathBuf,
-        /// Its shape.
-        found: Vec<usize>,
-        /// The shape the station implies.
-        expected: Vec<usize>,
-        /// What the axes are.
-        what: &'static str,
-    },
-    /// `surfaces.json` could not be written.
-    #[error(transparent)]
-    SurfacesFile(#[from] SurfacesFileError),
-    /// A picture could not be drawn or written.
-    #[error(transparent)]
-    Plot(#[from] PlotError),
-    /// A file or folder of the result could not be written.
-    #[error("writing {path}: {source}")]
-    Io {
-        /// The path.
-        path: PathBuf,
-        /// The cause.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A result folder cannot be used (a file, or a folder that is not
-    /// an mfd result).
-    #[error("{path}: {problem}")]
-    Output {
-        /// The folder.
-        path: PathBuf,
-        /// Why.
-        problem: String,
-    },
-    /// The data hold nothing the stages can measure: which pixels were
-    /// looked at and what was found, in words.
-    #[error("{0}")]
-    NoSignal(String),
-    /// A station uncertainty file could not be read.
-    #[error(transparent)]
-    Uncertainty(#[from] UncertaintyError),
-    /// The refined station could not be written.
-    #[error(transparent)]
-    Station(#[from] crate::optics::station::StationError),
-    /// A station uncertainty file is that of another station.
-    #[error(
-        "{uncertainty}: its `station` field names \"{named}\" ({resolved}), but the station \
-         used is {station}, a different station: give the uncertainty of this station \
-         (--uncertainty), or the station it belongs to (--station)"
-    )]
-    UncertaintyOfAnotherStation {
-        /// The uncertainty file.
-        uncertainty: PathBuf,
-        /// What its `station` field says.
-        named: String,
-        /// That, relative to the uncertainty file's folder.
-        resolved: PathBuf,
-        /// The station file used.
-        station: PathBuf,
-    },
-    /// `summary.json` could not be serialised.
-    #[error("{path}: {source}")]
-    Json {
-        /// The path.
-        path: PathBuf,
-        /// The cause.
-        #[source]
-        source: serde_json::Error,
-    },
-}
-
-impl crate::outcome::Classify for PipelineError {
-    fn outcome(&self) -> Option<crate::outcome::Outcome> {
-        use crate::outcome::Outcome;
-        match self {
-            PipelineError::UncertaintyOfAnotherStation { .. } => Some(Outcome::Input),
-            _ => None,
-        }
-    }
-}
 
 /// What a reconstruction starts from.
 pub enum Input<'a> {
