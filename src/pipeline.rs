@@ -202,10 +202,7 @@ fn read_acquisition(
     let total = acq.frames().len();
     let max_count = solver
         .push_acquisition(acq, total, progress)
-        .map_err(|e| match e {
-            FeedError::Read(e) => PipelineError::from(e),
-            FeedError::Push(e) => PipelineError::from(e),
-        })?;
+        .map_err(FeedError::into_cause::<PipelineError>)?;
     let stage = spectral_stage(
         &mut solver,
         station,

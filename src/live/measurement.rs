@@ -352,10 +352,7 @@ fn start_solver(
         let acq = Acquisition::open(dir)?;
         solver
             .push_acquisition(&acq, recorded, &mut |_, _| {})
-            .map_err(|e| match e {
-                FeedError::Read(e) => MeasurementError::from(e),
-                FeedError::Push(e) => MeasurementError::from(e),
-            })?;
+            .map_err(FeedError::into_cause::<MeasurementError>)?;
     }
     Ok(solver)
 }

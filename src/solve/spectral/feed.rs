@@ -20,6 +20,17 @@ pub enum FeedError {
     Push(#[from] SpectralError),
 }
 
+impl FeedError {
+    /// The cause as the caller's own error, for an error type that holds
+    /// both a reading and a solver failure.
+    pub fn into_cause<E: From<AcquisitionError> + From<SpectralError>>(self) -> E {
+        match self {
+            FeedError::Read(e) => e.into(),
+            FeedError::Push(e) => e.into(),
+        }
+    }
+}
+
 impl SpectralSolver {
     /// Reads the first `count` frames of `acq`, in its manifest's order, and
     /// pushes each under its own index; `progress(k, count)` after the k-th.
