@@ -4,15 +4,25 @@
 //! ([`crate::kernels::lm`]): the resection, the screen from the flat and the
 //! joint adjustment are all this function with different sets.
 //!
-//! Before it moves anything it chooses what to estimate: a parameter that
-//! the weighted normal matrix does not determine better than its prior
+//! # One estimator: the priors are in the cost
+//! Every parameter with a prior range (what the nominal station may be off
+//! by) carries it as a pseudo-observation `(x − nominal) / prior` in the
+//! cost: the adjustment is a maximum a posteriori one, and its covariance
+//! `(N + P)⁻¹` (N the data's normal matrix, P the priors' precisions)
+//! includes them. The rule that holds parameters judges with the same
+//! priors: a parameter the data do not determine better than its prior
 //! range (a degeneracy, or data too weak) is held at its nominal value,
-//! worst first, one at a time, and the condition numbers of the
-//! correlation-scaled normal matrix are kept for the report. The result's
-//! covariance is the inverse normal matrix over the estimated parameters,
-//! plus what the held ones' prior σ does to them through their
-//! correlation (the "consider" covariance), so that it covers the error of
-//! every parameter, held or estimated.
+//! worst first, one at a time. So the cost and the hold rule agree: a
+//! combination the data leave weak (a camera and screen sliding along the
+//! line of sight while the focal length follows, with targets at nearly
+//! one distance) is bounded by the priors in both, and named in the
+//! report ([`super::weak`]) rather than wandered along.
+//!
+//! The result's covariance is the inverse normal matrix over the estimated
+//! parameters, priors included, plus what the held ones' prior σ does to
+//! them through their correlation (the "consider" covariance), so that it
+//! covers the error of every parameter, held or estimated. The condition
+//! numbers of the correlation-scaled data matrix are kept for the report.
 //!
 //! The Jacobian is by central differences: the residuals go through the
 //! distortion's Newton inverse and the cover glass's refraction, whose
@@ -27,13 +37,20 @@ use super::error::CalibrationError;
 use super::input::CalibrationInput;
 use super::params::{difference, Param, State};
 use super::residuals::{item, item_count, Blocks, Whitening};
-use crate::kernels::lm::{minimise, Damping, LeastSquares, Linearisation};
+use super::weak::{failure_detail, weak_directions, WeakDirection};
+use crate::kernels::lm::{minimise, Damping, LeastSquares, Linearisation, Stall};
 
 /// The schedule: the calibration starts within millimetres and tenths of a
 /// degree of its optimum on a nearly linear problem (the targets' and the
 /// flat's residuals are smooth in every parameter), so Gauss–Newton is
 /// right from the first step and damping only guards against a poor
 /// nominal station; each evaluation is cheap, so every step is evaluated.
+/// Where a session leaves a weak direction the valley along it is curved
+/// (a camera sliding along its line of sight while the focal length
+/// follows), and LM can crawl: the stall test ends the crawl once 40
+/// trials have lowered χ² by less than 0.05 in all, a fall that moves the
+/// point by under a quarter of its σ along any direction the data see
+/// (Δχ² = 1 at 1 σ), and lets it go on for as long as it buys more.
 const DAMPING: Damping = Damping {
     start: 1e-4,
     up: 10.0,
@@ -41,10 +58,16 @@ const DAMPING: Damping = Damping {
     floor: 1e-12,
     cap: 1e10,
     trust_prediction_below: None,
+    stall: Some(Stall {
+        window: 40,
+        decrease: 0.05,
+    }),
 };
 
-/// Trial steps allowed per adjustment.
-const MAX_TRIALS: usize = 200;
+/// Trial steps allowed per adjustment: a guard against a loop that keeps
+/// making progress for ever (a bug), not the convergence rule (the stall
+/// test is); at about 20 ms a trial on a full session, 20 s.
+const MAX_TRIALS: usize = 1000;
 
 /// A cost decrease below this (χ² units) is no progress: a thousandth of
 /// the χ² a single residual contributes.
@@ -56,7 +79,9 @@ pub struct Normal {
     cost: f64,
     jtj: DMatrix<f64>,
     jtr: DVector<f64>,
-    /// Number of residuals.
+    /// The priors' part of the cost.
+    prior_cost: f64,
+    /// Number of residuals (data alone).
     pub residuals: usize,
 }
 
@@ -77,6 +102,9 @@ struct Problem<'a> {
     params: &'a [Param],
     blocks: Blocks,
     whitening: &'a Whitening,
+    /// Where the priors are centred; `None`: the data alone (what the hold
+    /// rule reads, adding the priors itself).
+    nominal: Option<&'a State>,
 }
 
 impl LeastSquares for Problem<'_> {
@@ -124,6 +152,21 @@ impl LeastSquares for Problem<'_> {
                 (a, g, c, m)
             })
             .reduce(zero, |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2, x.3 + y.3));
+        let (mut jtj, mut jtr, mut prior_cost) = (jtj, jtr, 0.0);
+        if let Some(nominal) = self.nominal {
+            // `r = (x − nominal) / prior`, whose derivative along the
+            // parameter's own coordinate is `1 / prior`.
+            let off = difference(nominal, p, self.params);
+            for (k, q) in self.params.iter().enumerate() {
+                if let Some(sd) = q.prior_std() {
+                    let r = off[k] / sd;
+                    jtj[(k, k)] += 1.0 / (sd * sd);
+                    jtr[k] -= r / sd;
+                    prior_cost += r * r;
+                }
+            }
+        }
+        let cost = cost + prior_cost;
         Normal {
             cost: if cost.is_finite() {
                 cost
@@ -132,6 +175,7 @@ impl LeastSquares for Problem<'_> {
             },
             jtj,
             jtr,
+            prior_cost,
             residuals,
         }
     }
@@ -291,22 +335,32 @@ pub struct Adjusted {
     pub params: Vec<Param>,
     /// Covariance over `params` (consider covariance for the held ones).
     pub covariance: DMatrix<f64>,
-    /// χ² at the end.
+    /// χ² of the data at the end (the priors' part of the cost apart).
     pub chi2: f64,
-    /// Residuals minus estimated parameters.
+    /// The priors' part of the cost at the end: `Σ ((x − nominal)/prior)²`.
+    pub prior_chi2: f64,
+    /// Residuals minus what the estimated parameters take of them: their
+    /// number less `tr(N (N + P)⁻¹)`, the data's share of each parameter
+    /// (1 where the data determine it, 0 where its prior does), rounded.
     pub dof: usize,
     /// Trial steps evaluated.
     pub trials: usize,
+    /// Why the adjustment stopped.
+    pub stop: crate::kernels::lm::Stop,
+    /// Combinations of the estimated parameters that the data leave weak.
+    pub weak: Vec<WeakDirection>,
 }
 
 /// Adjusts `start` over the parameters of `candidates` that the data
 /// determine, against the residual `blocks`, with the whitening fixed at
-/// `start`. A parameter it holds is put back at its value in `nominal`
-/// (what the session knew before any data): an earlier step with other
-/// data may have moved it, and its prior σ is about the nominal value.
+/// `start`, every parameter's prior centred on its value in `nominal` (what
+/// the session knew before any data). A parameter it holds is put back
+/// there: an earlier step with other data may have moved it, and its prior
+/// σ is about the nominal value.
 ///
 /// # Errors
-/// [`CalibrationError::NotConverged`] naming `step`.
+/// [`CalibrationError::NotConverged`] naming `step`, the parameters that
+/// moved most and the readings with the largest residuals.
 pub fn adjust(
     input: &CalibrationInput,
     start: State,
@@ -316,13 +370,14 @@ pub fn adjust(
     step: &'static str,
 ) -> Result<Adjusted, CalibrationError> {
     let whitening = Whitening::at(input, &start)?;
-    let all = Problem {
+    let data_only = Problem {
         input,
         params: candidates,
         blocks,
         whitening: &whitening,
+        nominal: None,
     };
-    let (keep, selection) = select(all.evaluate(&start).jtj(), candidates);
+    let (keep, selection) = select(data_only.evaluate(&start).jtj(), candidates);
     let estimated: Vec<Param> = keep.iter().map(|&i| candidates[i]).collect();
     let start = (0..candidates.len())
         .filter(|i| !keep.contains(i))
@@ -333,15 +388,17 @@ pub fn adjust(
         });
     let problem = Problem {
         params: &estimated,
-        ..all
+        nominal: Some(nominal),
+        ..data_only
     };
     let at = problem.evaluate(&start);
-    let Ok(out) = minimise(&problem, start, at, &DAMPING, MAX_TRIALS);
+    let Ok(out) = minimise(&problem, start.clone(), at, &DAMPING, MAX_TRIALS);
     if !out.stop.converged() {
         return Err(CalibrationError::NotConverged {
             step,
             trials: out.trials,
             stop: format!("{:?}", out.stop),
+            detail: failure_detail(input, &estimated, blocks, &start, &out.params),
         });
     }
     let held: Vec<Param> = (0..candidates.len())
@@ -359,16 +416,29 @@ pub fn adjust(
             step,
             trials: out.trials,
             stop: "the normal matrix of the estimated parameters is singular".into(),
+            detail: String::new(),
         }
     })?;
+    // tr(P (N + P)⁻¹) over the estimated parameters: the share their
+    // priors take, which the data's χ² does not pay for.
+    let prior_share: f64 = estimated
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| p.prior_std().map(|sd| covariance[(k, k)] / (sd * sd)))
+        .sum();
+    let taken = estimated.len() as f64 - prior_share;
+    let weak = weak_directions(&covariance, &params[..estimated.len()]);
     Ok(Adjusted {
         state: out.params,
         selection,
         params,
         covariance,
-        chi2: full.cost(),
-        dof: full.residuals.saturating_sub(estimated.len()),
+        chi2: full.cost() - full.prior_cost,
+        prior_chi2: full.prior_cost,
+        dof: (full.residuals as f64 - taken).round().max(0.0) as usize,
         trials: out.trials,
+        stop: out.stop,
+        weak,
     })
 }
 

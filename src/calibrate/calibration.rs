@@ -247,11 +247,34 @@ impl Calibration {
         let station = dir.join("station.toml");
         std::fs::write(&station, self.station.to_toml_string()).map_err(io(&station))?;
         let unc = dir.join("station_uncertainty.toml");
-        let text = self.uncertainty("station.toml").to_toml_string();
+        let text = self.uncertainty_comments() + &self.uncertainty("station.toml").to_toml_string();
         std::fs::write(&unc, text).map_err(io(&unc))?;
         let report = dir.join("report.json");
         std::fs::write(&report, self.report.to_json()).map_err(io(&report))?;
         Ok(())
+    }
+
+    /// Comment lines for the head of `station_uncertainty.toml`: the
+    /// combinations the session left weakly determined (the format has no
+    /// field for them, and a reader must not meet one it does not know; a
+    /// TOML comment is for the reader's human). Their σ is in the
+    /// covariance below as it is.
+    pub fn uncertainty_comments(&self) -> String {
+        let weak = self.report.steps.last().map_or(&[][..], |s| &s.weak[..]);
+        if weak.is_empty() {
+            return "# The session determined every estimated combination of the station's \
+                    degrees of freedom\n# better than its prior range.\n"
+                .into();
+        }
+        let mut s = format!(
+            "# {} combination(s) the session left weakly determined (σ near the prior range;\n\
+             # the covariance below carries it; 1 σ change of each parameter along it):\n",
+            weak.len()
+        );
+        for w in weak {
+            s += &format!("#   {}\n", w.describe());
+        }
+        s
     }
 
     /// The station's uncertainty (`mfd-station-uncertainty/1`, for the

@@ -33,10 +33,7 @@ pub enum CalibrationError {
         index: usize,
     },
     /// A least-squares step did not converge.
-    #[error(
-        "calibration step `{step}` did not converge after {trials} trials ({stop}): \
-         check the session's readings against the nominal station"
-    )]
+    #[error("calibration step `{step}` did not converge after {trials} trials ({stop}){detail}")]
     NotConverged {
         /// The step (`resection`, `screen`, `joint`).
         step: &'static str,
@@ -44,6 +41,8 @@ pub enum CalibrationError {
         trials: usize,
         /// Why it stopped.
         stop: String,
+        /// What moved and which readings fit worst (empty, or `; …`).
+        detail: String,
     },
     /// The calibrated station is not a valid station (e.g. a distortion
     /// whose inverse is not unique over the sensor).

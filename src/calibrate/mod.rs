@@ -54,6 +54,7 @@ pub mod session_file;
 pub mod simulate;
 mod spot_background;
 pub mod spread;
+pub mod weak;
 
 pub use rules::{station_size_mm, PLAUSIBLE_STAGE_STD_UM, UNIT_MARGIN};
 pub use session::{ObservedTarget, Session, SessionError, Target, TargetObservation};

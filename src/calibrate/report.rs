@@ -12,6 +12,7 @@ use super::adjust::{Adjusted, Selection};
 use super::input::CalibrationInput;
 use super::residuals::{raw, Blocks, Whitening};
 use super::spread::chi2_quantile_999;
+use super::weak::WeakDirection;
 
 /// One residual block's figures at the end of a step.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -38,14 +39,21 @@ pub struct StepReport {
     pub name: &'static str,
     /// Trial steps of its least squares.
     pub trials: usize,
-    /// χ² at its end.
+    /// Why its least squares stopped (`SmallDecrease`, `Stalled`, …).
+    pub stop: String,
+    /// χ² of the data at its end.
     pub chi2: f64,
-    /// Residuals minus estimated parameters.
+    /// The priors' part of the cost at its end (`Σ ((x − nominal)/prior)²`).
+    pub prior_chi2: f64,
+    /// Residuals minus what the estimated parameters take of them.
     pub dof: usize,
     /// `chi2 / dof` (≈ 1 when the model and the stated noise hold).
     pub chi2_per_dof: f64,
     /// What it estimated and held.
     pub selection: Selection,
+    /// Combinations of the estimated parameters that the data leave at
+    /// their priors ([`super::weak`]), worst first.
+    pub weak: Vec<WeakDirection>,
     /// Its residual blocks.
     pub blocks: Vec<BlockReport>,
     /// Readings whose whitened residual lies beyond χ²'s 99.9 % quantile
@@ -195,10 +203,13 @@ impl StepReport {
         StepReport {
             name,
             trials: a.trials,
+            stop: format!("{:?}", a.stop),
             chi2: a.chi2,
+            prior_chi2: a.prior_chi2,
             dof: a.dof,
             chi2_per_dof: a.chi2 / a.dof.max(1) as f64,
             selection: a.selection.clone(),
+            weak: a.weak.clone(),
             blocks: out,
             suspects,
         }
@@ -281,6 +292,14 @@ impl Report {
                      (condition {:.1e})\n",
                     h.name, h.marginal_std, h.prior_std, h.condition_before
                 );
+            }
+            if k == last {
+                for w in &step.weak {
+                    s += &format!(
+                        "  weakly determined (the data leave it near its prior): {}\n",
+                        w.describe()
+                    );
+                }
             }
         }
         for n in &self.notes {

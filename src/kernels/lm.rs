@@ -31,6 +31,18 @@
 //! point is then the fit and the evaluation that would only confirm it is
 //! saved.
 //!
+//! Stalled ([`Stop::Stalled`], where the schedule asks for it with
+//! [`Damping::stall`]): over the last `window` evaluated trials the cost
+//! fell by less than `decrease` in all. That is the stall test that
+//! replaces a fixed trial count on a problem with a curved, weakly
+//! determined valley, where LM alternates accepted and rejected steps and
+//! crawls: the loop stops when the crawl no longer buys anything, however
+//! many trials it has taken, and keeps going while it does (the trial
+//! limit is then a guard against a bug, not the convergence rule). Whether
+//! a stall is a minimum is the problem's to say: with the cost in χ² units
+//! a total fall well under 1 over many trials moves the point by a small
+//! fraction of its σ along any direction the data see.
+//!
 //! # Schedules
 //! The scaling and the rules above are one for both users; the numbers of
 //! the schedule ([`Damping`]) are each user's, because the two start in
@@ -69,6 +81,19 @@ pub struct Damping {
     /// λ up to which the predicted decrease of the next step is trusted to
     /// stop the loop; `None`: never (every step is evaluated).
     pub trust_prediction_below: Option<f64>,
+    /// The stall test: stop when the last `window` trials lowered the cost
+    /// by less than `decrease` in all; `None`: no stall test.
+    pub stall: Option<Stall>,
+}
+
+/// The stall test of a [`Damping`] schedule (see the
+/// [module documentation](self)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stall {
+    /// Trials looked back over.
+    pub window: usize,
+    /// The total fall of the cost below which the loop has stalled.
+    pub decrease: f64,
 }
 
 /// One linearisation of a problem: what the loop reads of its normal
@@ -132,6 +157,12 @@ pub enum Stop {
     Floor,
     /// The damped system could not be factored up to the damping cap.
     Singular,
+    /// The last [`Stall::window`] trials lowered the cost by less than
+    /// [`Stall::decrease`] in all.
+    Stalled {
+        /// The fall of the cost over the window.
+        decrease: f64,
+    },
     /// The trial limit was reached.
     TrialLimit,
 }
@@ -195,7 +226,17 @@ pub fn minimise<L: LeastSquares>(
     let mut lambda = damping.start;
     let mut trials = 0;
     let mut last_step = None;
+    // The cost after each trial (accepted or not: the current one).
+    let mut history = vec![cur.cost()];
     let stop = loop {
+        if let Some(st) = damping.stall {
+            if history.len() > st.window {
+                let decrease = history[history.len() - 1 - st.window] - cur.cost();
+                if decrease < st.decrease {
+                    break Stop::Stalled { decrease };
+                }
+            }
+        }
         if trials >= max_trials {
             break Stop::TrialLimit;
         }
@@ -229,6 +270,7 @@ pub fn minimise<L: LeastSquares>(
             cur = trial;
             lambda = (lambda / damping.down).max(damping.floor);
             last_step = Some(step);
+            history.push(cur.cost());
             if small_step {
                 break Stop::SmallStep;
             }
@@ -237,6 +279,7 @@ pub fn minimise<L: LeastSquares>(
             }
         } else {
             last_step = Some(step);
+            history.push(cur.cost());
             lambda *= damping.up;
             if lambda > damping.cap {
                 break Stop::Floor;

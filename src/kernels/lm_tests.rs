@@ -64,6 +64,7 @@ const SCHEDULE: Damping = Damping {
     floor: 1e-12,
     cap: 1e12,
     trust_prediction_below: Some(1e-2),
+    stall: None,
 };
 
 fn run(max_trials: usize) -> Outcome<[f64; 2], Lin> {
@@ -128,4 +129,47 @@ fn damped_solve_is_marquardts() {
     }
     let want = damped.cholesky().unwrap().solve(&rhs);
     assert!((solve_damped(&big, lambda, &rhs).unwrap() - want).amax() < 1e-14);
+}
+
+#[test]
+fn a_crawl_stops_at_the_stall_test_and_not_before() {
+    // Rosenbrock from its classic start: the cost falls from 24.2 to 0
+    // along the curved valley. A stall test whose window's fall must reach
+    // 1e6 (far above any fall there is) stops at its first chance, after
+    // exactly `window` trials; one asking for 1e-300 never fires, and the
+    // loop converges as without it.
+    let start = [-1.2, 1.0];
+    let stalled = Damping {
+        stall: Some(Stall {
+            window: 5,
+            decrease: 1e6,
+        }),
+        ..SCHEDULE
+    };
+    let Ok(out) = minimise(
+        &Rosenbrock,
+        start,
+        Rosenbrock.evaluate(&start),
+        &stalled,
+        200,
+    );
+    assert!(matches!(out.stop, Stop::Stalled { .. }), "{:?}", out.stop);
+    assert_eq!(out.trials, 5);
+    assert!(out.stop.converged());
+    let patient = Damping {
+        stall: Some(Stall {
+            window: 5,
+            decrease: 1e-300,
+        }),
+        ..SCHEDULE
+    };
+    let Ok(out) = minimise(
+        &Rosenbrock,
+        start,
+        Rosenbrock.evaluate(&start),
+        &patient,
+        200,
+    );
+    assert!(!matches!(out.stop, Stop::Stalled { .. }), "{:?}", out.stop);
+    assert!((out.params[0] - 1.0).abs() < 1e-10);
 }

@@ -47,6 +47,9 @@ pub struct SessionSpec {
     pub target_heights_mm: Vec<f64>,
     /// Targets per layer, columns × rows over the sensor.
     pub targets_grid: [u32; 2],
+    /// The part of the sensor the targets span, about its centre (1: the
+    /// layout of `mfd calibrate targets`, edge to edge inside its inset).
+    pub target_span: f64,
     /// Flat pixels sampled, columns × rows over the sensor.
     pub flat_grid: [u32; 2],
     /// Radius of the reference flat, mm: pixels that see it carry a screen point.
@@ -75,6 +78,7 @@ impl Default for SessionSpec {
             flat_std_px: 0.02,
             target_heights_mm: vec![0.0, 60.0, 120.0],
             targets_grid: [5, 4],
+            target_span: 1.0,
             flat_grid: [40, 30],
             flat_radius_mm: 75.0,
             element_points: 6,
@@ -162,6 +166,8 @@ fn targets(
     // The operator's layout (`mfd calibrate targets`), placed by the truth.
     for (layer, &h) in spec.target_heights_mm.iter().enumerate() {
         for at in target_layout(layer, (nx, ny), cam.width, cam.height) {
+            let middle = Point2::new(f64::from(cam.width), f64::from(cam.height)) / 2.0;
+            let at = middle + (at - middle) * spec.target_span;
             let Some(world) = on_plane(truth, at.x, at.y, h) else {
                 continue;
             };

@@ -119,6 +119,7 @@ pub const DAMPING: Damping = Damping {
     floor: 1e-12,
     cap: 1e8,
     trust_prediction_below: None,
+    stall: None,
 };
 
 /// The normal equations as the shared loop reads them: the problem's
@@ -290,6 +291,11 @@ fn verdict(
             )
         }
         Stop::Singular => return None,
+        // The surfaces' schedule has no stall test ([`DAMPING`]).
+        Stop::Stalled { decrease } => (
+            true,
+            format!("χ² drop {decrease:.1e} over the stall window"),
+        ),
         Stop::TrialLimit => (false, format!("iteration limit {}", opts.max_iter)),
     })
 }

@@ -92,6 +92,7 @@ pub const DAMPING: Damping = Damping {
     floor: 1e-12,
     cap: 1e12,
     trust_prediction_below: Some(1e-2),
+    stall: None,
 };
 
 impl Linearisation for Normal {

@@ -32,6 +32,7 @@ const DAMPING: Damping = Damping {
     floor: 1e-12,
     cap: 1e12,
     trust_prediction_below: None,
+    stall: None,
 };
 
 /// A step moving (u, v) by less than this (screen px) has converged: 10⁻³
