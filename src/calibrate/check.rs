@@ -243,6 +243,7 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
     let cam = &session.nominal.camera;
     let size = (cam.width, cam.height);
     let mut pairs = Vec::new();
+    let mut sigmas = Vec::new();
     for t in &session.targets {
         let entry = t.entry();
         let found: Option<(Point2<f64>, Option<Centroid>)> = match &t.observation {
@@ -261,6 +262,14 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
                 }
             }
         };
+        if let Some((_, c)) = &found {
+            sigmas.push(
+                c.as_ref()
+                    .map_or(super::from_session::GIVEN_CENTROID_STD_PX, |c| {
+                        c.std_px()[0].max(c.std_px()[1])
+                    }),
+            );
+        }
         if let Some((_, Some(c))) = &found {
             if c.saturated_px > 0 {
                 report.push(
@@ -317,6 +326,14 @@ fn target_findings(session: &Session, frame: &WorldFrame, report: &mut CheckRepo
     }
     flag_off_pattern(&pairs, report);
     coverage(report, size);
+    // The layout's weak directions with the centroids' median σ (a given
+    // centroid's σ where no image gave one).
+    sigmas.sort_by(f64::total_cmp);
+    let sigma = sigmas
+        .get(sigmas.len() / 2)
+        .copied()
+        .unwrap_or(super::from_session::GIVEN_CENTROID_STD_PX);
+    super::check_layout::layout_findings(session, sigma, report);
 }
 
 /// A target for the pattern test: its slot in the report, world position,

@@ -20,7 +20,10 @@ fn session(seed: u64, spec: SessionSpec) -> SimulatedSession {
 
 /// `(estimate − truth)ᵀ C⁻¹ (estimate − truth)` over every parameter the
 /// calibration reports, their number, and each one's `(error / σ)²`.
-fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize, Vec<(String, f64)>) {
+pub(crate) fn chi2_of_errors(
+    sim: &SimulatedSession,
+    cal: &Calibration,
+) -> (f64, usize, Vec<(String, f64)>) {
     let params: Vec<Param> = cal
         .names
         .iter()
