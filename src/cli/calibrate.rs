@@ -269,7 +269,11 @@ fn capture(args: &CaptureArgs) -> anyhow::Result<()> {
         .try_into()
         .ok()
         .filter(|s: &[f64; 3]| s.iter().all(|v| v.is_finite()))
-        .context("--stage-mm: expected three finite numbers X,Y,Z in mm")?;
+        .ok_or_else(|| {
+            super::exit::usage(anyhow::anyhow!(
+                "--stage-mm: expected three finite numbers X,Y,Z in mm"
+            ))
+        })?;
     let spec: CameraSpec = args.camera.parse()?;
     let mut camera = if spec.is_simulated() {
         mfd::live::camera::open_for_target(&spec, simulated_target(args, stage)?)?

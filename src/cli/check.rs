@@ -165,7 +165,8 @@ pub fn height_scale(s: &str) -> Result<f64, String> {
         Ok(v)
     } else {
         Err(format!(
-            "{v}: expected ±1e-3 to ±1e9 (nm per stored unit: 1e-3 for pm, 1 for nm, 1e9 for m)"
+            "{}: expected ±1e-3 to ±1e9 (nm per stored unit: 1e-3 for pm, 1 for nm, 1e9 for m)",
+            s.trim()
         ))
     }
 }

@@ -271,7 +271,7 @@ fn field_of_view(check: &Check, c: &super::file::CameraFile) -> Result<(), Stati
     check.fail(
         "camera.focal_length_mm",
         format!(
-            "{} mm: the sensor's corner ({half_diagonal_mm:.2} mm from its centre) would be \
+            "{:?} mm: the sensor's corner ({half_diagonal_mm:.2} mm from its centre) would be \
              {half_field_deg:.1}° off the axis, beyond the {MAX_HALF_FIELD_DEG}° a \
              rectilinear lens images; with this sensor the focal length must be at least \
              {shortest:.2} mm (is it in mm?)",
