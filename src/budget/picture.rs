@@ -43,6 +43,13 @@ pub enum PictureError {
     },
 }
 
+impl crate::outcome::Classify for PictureError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        // Drawing the picture: a failure of its own (exit 1).
+        None
+    }
+}
+
 /// One contributor: its name and per-coefficient 1σ (or bias), front and back.
 struct Contributor {
     name: String,

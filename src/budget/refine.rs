@@ -84,6 +84,16 @@ pub enum RefineError {
     Surface(#[from] SurfaceError),
 }
 
+impl crate::outcome::Classify for RefineError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            RefineError::NoPrior { .. } => Some(Outcome::Input),
+            RefineError::Surface(e) => e.outcome(),
+        }
+    }
+}
+
 /// Estimates `dofs` jointly with the surfaces of `obs` (built on `station`),
 /// with the prior of `uncertainty`; `opts` with the terms fixed.
 ///

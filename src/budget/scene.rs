@@ -69,6 +69,22 @@ pub enum BudgetError {
     Surface(#[from] SurfaceError),
 }
 
+impl crate::outcome::Classify for BudgetError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            BudgetError::Io { source, .. } => crate::outcome::io_outcome(source),
+            // An option (`input` names it: `--std camera.q=1`) the budget
+            // cannot take is a bad command line; a file's field is input.
+            BudgetError::Invalid { input, .. } if input.starts_with("--") => Some(Outcome::Range),
+            BudgetError::Parse { .. } | BudgetError::Invalid { .. } => Some(Outcome::Input),
+            BudgetError::Surfaces(e) => e.outcome(),
+            BudgetError::Zernike(e) => e.outcome(),
+            BudgetError::Surface(e) => e.outcome(),
+        }
+    }
+}
+
 fn invalid(input: impl Into<String>, problem: impl Into<String>) -> BudgetError {
     BudgetError::Invalid {
         input: input.into(),

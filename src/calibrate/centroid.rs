@@ -114,6 +114,18 @@ pub enum CentroidError {
     },
 }
 
+impl crate::outcome::Classify for CentroidError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            CentroidError::Image { source, .. } => source.outcome(),
+            // A target frame without one clean spot is a session entry to
+            // capture again: the session is not valid input yet.
+            _ => Some(Outcome::Input),
+        }
+    }
+}
+
 /// A spot's centroid.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Centroid {

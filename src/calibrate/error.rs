@@ -64,3 +64,21 @@ pub enum CalibrationError {
         source: std::io::Error,
     },
 }
+
+impl crate::outcome::Classify for CalibrationError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            // The session's readings: too few, degenerate, or with a
+            // covariance that is not one, or a result the readings make
+            // invalid (the targets' spread): fix the session.
+            CalibrationError::TooFew { .. }
+            | CalibrationError::Degenerate { .. }
+            | CalibrationError::BadCovariance { .. }
+            | CalibrationError::InvalidResult { .. } => Some(Outcome::Input),
+            // No convergence: no class of its own (exit 1).
+            CalibrationError::NotConverged { .. } => None,
+            CalibrationError::Io { source, .. } => crate::outcome::io_outcome(source),
+        }
+    }
+}

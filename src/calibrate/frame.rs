@@ -49,6 +49,14 @@ pub enum FrameError {
     },
 }
 
+impl crate::outcome::Classify for FrameError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        // The session's flat points do not define the world frame.
+        Some(Outcome::Input)
+    }
+}
+
 /// A plane fitted to stage readings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlaneFit {

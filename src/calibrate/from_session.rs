@@ -89,6 +89,23 @@ pub enum SessionSolveError {
     Calibration(#[from] CalibrationError),
 }
 
+impl crate::outcome::Classify for SessionSolveError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            SessionSolveError::Session(e) => e.outcome(),
+            SessionSolveError::Centroid(e) => e.outcome(),
+            SessionSolveError::Calibration(e) => e.outcome(),
+            SessionSolveError::FlatAcquisition { source } => source.outcome(),
+            SessionSolveError::FlatDecode { source, .. } => source.outcome(),
+            // The reference flat's recording is of something else.
+            SessionSolveError::TwoReflections { .. } => Some(Outcome::Input),
+            // Too little of the flat decoded: nothing to measure there.
+            SessionSolveError::FlatTooSmall { .. } => Some(Outcome::NoSignal),
+        }
+    }
+}
+
 /// What the reference flat's decode gave.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FlatDecode {

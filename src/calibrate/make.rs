@@ -51,6 +51,19 @@ pub enum MakeError {
     },
 }
 
+impl crate::outcome::Classify for MakeError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            MakeError::Io { source, .. } => crate::outcome::io_outcome(source),
+            MakeError::Exists { .. } | MakeError::Heights { .. } => Some(Outcome::Input),
+            MakeError::Session(e) => e.outcome(),
+            MakeError::Camera(e) => e.outcome(),
+            MakeError::Image(e) => e.outcome(),
+        }
+    }
+}
+
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> MakeError + '_ {
     move |source| MakeError::Io {
         path: path.to_path_buf(),

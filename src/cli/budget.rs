@@ -39,10 +39,10 @@ pub struct BudgetArgs {
     #[arg(long)]
     surfaces: Option<PathBuf>,
     /// Read noise, fraction of full scale, as `mfd simulate --noise`.
-    #[arg(long, value_parser = super::check::non_negative, default_value_t = 0.05)]
+    #[arg(long, value_parser = super::check::noise_fraction, default_value_t = 0.05)]
     noise: f64,
     /// The camera's bits per sample (the station file does not carry it).
-    #[arg(long, value_parser = super::check::bit_depth, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::sim_bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Modulation falloff τ_max, as `mfd simulate --tau-max`.
     #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
@@ -51,7 +51,7 @@ pub struct BudgetArgs {
     #[arg(long, value_parser = super::check::fraction, default_value_t = 0.01)]
     ambient: f64,
     /// Zernike terms per surface, fixed.
-    #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 36)]
+    #[arg(long, value_parser = super::check::budget_terms, default_value_t = 36)]
     terms: usize,
     /// The bound is evaluated on blocks of this many pixels square
     /// (default: 1 up to 20000 lit pixels, larger beyond).
@@ -193,18 +193,6 @@ pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
 
 /// The flags' ranges, each error naming its flag.
 fn check_options(args: &BudgetArgs) -> anyhow::Result<()> {
-    if !(args.noise.is_finite() && args.noise > 0.0 && args.noise < 1.0) {
-        anyhow::bail!("--noise {}: expected a fraction of full scale in (0, 1) (the imaging noise's bound needs noise)", args.noise);
-    }
-    if ![8, 12, 16].contains(&args.bit_depth) {
-        anyhow::bail!("--bit-depth {}: expected 8, 12 or 16", args.bit_depth);
-    }
-    if args.terms < 4 {
-        anyhow::bail!(
-            "--terms {}: expected at least 4 (defocus is the first term the budget reports)",
-            args.terms
-        );
-    }
     if args.monte_carlo == Some(0) {
         anyhow::bail!("--monte-carlo 0: expected at least 1 draw");
     }

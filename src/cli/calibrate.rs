@@ -169,7 +169,11 @@ fn targets(args: &TargetsArgs) -> anyhow::Result<()> {
     let grid = match args.grid[..] {
         [n] => (n, n),
         [nx, ny] => (nx, ny),
-        _ => anyhow::bail!("--grid: expected N or NX,NY"),
+        _ => {
+            return Err(super::exit::usage(anyhow::anyhow!(
+                "--grid: expected N or NX,NY"
+            )))
+        }
     };
     let planned = make::plan_targets(
         &station,
@@ -247,9 +251,13 @@ fn run_check(args: &CheckArgs) -> anyhow::Result<()> {
             ""
         }
     );
+    // The findings name the entries at fault: a session not ready to
+    // solve is input that is not valid yet (exit 3).
     anyhow::ensure!(
         report.ready(),
-        "{e} errors in the session: fix them, then check again"
+        super::exit::input(anyhow::anyhow!(
+            "{e} errors in the session: fix them, then check again"
+        ))
     );
     Ok(())
 }
@@ -261,7 +269,11 @@ fn capture(args: &CaptureArgs) -> anyhow::Result<()> {
         .try_into()
         .ok()
         .filter(|s: &[f64; 3]| s.iter().all(|v| v.is_finite()))
-        .context("--stage-mm: expected three finite numbers X,Y,Z in mm")?;
+        .ok_or_else(|| {
+            super::exit::usage(anyhow::anyhow!(
+                "--stage-mm: expected three finite numbers X,Y,Z in mm"
+            ))
+        })?;
     let spec: CameraSpec = args.camera.parse()?;
     let mut camera = if spec.is_simulated() {
         mfd::live::camera::open_for_target(&spec, simulated_target(args, stage)?)?
@@ -334,7 +346,10 @@ fn simulated_target(args: &CaptureArgs, stage: [f64; 3]) -> anyhow::Result<SpotC
     let full = f64::from(u16::MAX);
     anyhow::ensure!(
         (0.0..0.5).contains(&args.sim_noise),
-        "--sim-noise: expected a fraction in [0, 0.5)"
+        super::exit::usage(anyhow::anyhow!(
+            "--sim-noise {}: expected a fraction in [0, 0.5)",
+            args.sim_noise
+        ))
     );
     let scene = SpotScene {
         resolution: (cam.width, cam.height),

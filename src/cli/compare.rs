@@ -2,7 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
 use clap::Args;
 
 use mfd::formats::npy;
@@ -48,10 +47,14 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     match (&args.surfaces, &args.interferometer.interferometer) {
         (Some(s), Some(_)) => super::compare_interferometer::run(&args.interferometer, s)?,
         (None, Some(_)) => {
-            bail!("--interferometer needs --surfaces (the surfaces.json to compare)")
+            return Err(super::exit::usage(anyhow::anyhow!(
+                "--interferometer needs --surfaces (the surfaces.json to compare)"
+            )))
         }
         (Some(_), None) if args.truth_surfaces.is_none() => {
-            bail!("--surfaces needs --truth-surfaces or --interferometer")
+            return Err(super::exit::usage(anyhow::anyhow!(
+                "--surfaces needs --truth-surfaces or --interferometer"
+            )))
         }
         _ => {}
     }
@@ -62,12 +65,12 @@ fn compare_surfaces(ours: &Path, truth: &Path, summary: Option<&Path>) -> anyhow
     let (a, b) = (SurfacesFile::load(ours)?, SurfacesFile::load(truth)?);
     let reported: Option<serde_json::Value> = match summary {
         Some(p) => {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            Some(
-                serde_json::from_str(&text)
-                    .with_context(|| format!("{}: not JSON", p.display()))?,
-            )
+            // A summary that cannot be read or is not JSON: bad input.
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| super::exit::input(anyhow::anyhow!("{}: {e}", p.display())))?;
+            Some(serde_json::from_str(&text).map_err(|e| {
+                super::exit::input(anyhow::anyhow!("{}: not JSON: {e}", p.display()))
+            })?)
         }
         None => None,
     };
@@ -112,17 +115,20 @@ fn compare_points(
     let (shape, ours) = npy::read_f64(screen_coords)?;
     let (tshape, truth) = npy::read_f64(truth_path)?;
     if shape != tshape || shape.len() != 4 || shape[2..] != [2, 2] {
-        bail!(
+        return Err(super::exit::input(anyhow::anyhow!(
             "{} has shape {shape:?} and {} {tshape:?}: expected the same [rows, cols, 2, 2]",
             screen_coords.display(),
             truth_path.display()
-        );
+        )));
     }
     let std = match &args.std {
         Some(p) => {
             let (s, v) = npy::read_f64(p)?;
             if s != shape {
-                bail!("{} has shape {s:?}, expected {shape:?}", p.display());
+                return Err(super::exit::input(anyhow::anyhow!(
+                    "{} has shape {s:?}, expected {shape:?}",
+                    p.display()
+                )));
             }
             Some(v)
         }

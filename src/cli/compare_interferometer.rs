@@ -40,7 +40,7 @@ pub struct InterferometerArgs {
     #[arg(long)]
     pub flip: Option<bool>,
     /// NPY/CSV: multiply the stored values by this to get nm (1e9 for metres).
-    #[arg(long, value_parser = super::check::finite, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::check::height_scale, default_value_t = 1.0, allow_hyphen_values = true)]
     pub height_scale_nm: f64,
     /// Print the comparison as JSON (mfd-comparison/1) instead of text.
     #[arg(long)]
@@ -57,7 +57,11 @@ impl InterferometerArgs {
         let center_px = match self.center_px.as_deref() {
             None => None,
             Some([c, r]) => Some([*c, *r]),
-            Some(v) => anyhow::bail!("--center-px takes two numbers column,row, not {v:?}"),
+            Some(v) => {
+                return Err(super::exit::usage(anyhow::anyhow!(
+                    "--center-px takes two numbers column,row, not {v:?}"
+                )))
+            }
         };
         Ok(RegistrationOptions {
             center_px,

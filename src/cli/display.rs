@@ -6,7 +6,8 @@ use std::time::Instant;
 #[cfg(feature = "display")]
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use anyhow::{bail, Context};
+#[cfg(feature = "display")]
+use anyhow::Context;
 use clap::Args;
 
 #[cfg(feature = "display")]
@@ -78,7 +79,7 @@ pub fn run(args: &DisplayArgs) -> anyhow::Result<()> {
         return list();
     }
     let Some(pattern) = args.pattern else {
-        bail!("give --list, or --pattern direction_deg,tau[,phase_rad] (with --offscreen --png FILE to render offscreen)");
+        return Err(super::exit::usage(anyhow::anyhow!("give --list, or --pattern direction_deg,tau[,phase_rad] (with --offscreen --png FILE to render offscreen)")));
     };
     let profile = DisplayProfile::load(&args.profile)?;
     let dither = if args.no_dither {
@@ -100,7 +101,10 @@ fn offscreen(
     pattern: &Pattern,
     dither: Dither,
 ) -> anyhow::Result<()> {
-    let png = args.png.as_ref().context("--offscreen needs --png FILE")?;
+    let png = args
+        .png
+        .as_ref()
+        .ok_or_else(|| super::exit::usage(anyhow::anyhow!("--offscreen needs --png FILE")))?;
     let mut display = OffscreenDisplay::from_profile(profile, dither)?;
     // The first draw includes the shader's compilation by the driver.
     let t0 = Instant::now();

@@ -75,6 +75,37 @@ pub fn classify(err: &anyhow::Error) -> Class {
         .unwrap_or(Class::Failure)
 }
 
+/// The class of a library error held by reference (one a result keeps, to
+/// be reported in a message of its own): its own or its causes', else
+/// [`Class::Failure`].
+pub fn class_of(e: &(dyn std::error::Error + 'static)) -> Class {
+    let mut next = Some(e);
+    while let Some(c) = next {
+        if let Some(class) = library_class(c) {
+            return class;
+        }
+        next = c.source();
+    }
+    Class::Failure
+}
+
+/// `message` for the library error `cause` (kept by reference), to exit
+/// with `cause`'s class.
+pub fn like(cause: &(dyn std::error::Error + 'static), message: String) -> anyhow::Error {
+    classified(class_of(cause), anyhow::Error::msg(message))
+}
+
+/// `error` as bad command line: an option missing or given wrong where clap
+/// cannot say it (exit 2).
+pub fn usage(error: anyhow::Error) -> anyhow::Error {
+    classified(Class::Usage, error)
+}
+
+/// `error` as bad input: a file or option that is not valid (exit 3).
+pub fn input(error: anyhow::Error) -> anyhow::Error {
+    classified(Class::Input, error)
+}
+
 /// The class of one of the library's errors, as its type says it
 /// ([`mfd::outcome::Classify`], implemented beside each error's
 /// definition); `None` for the others and for variants whose cause
@@ -86,6 +117,7 @@ fn library_class(e: &(dyn std::error::Error + 'static)) -> Option<Class> {
         ($($t:ty),+ $(,)?) => {
             $(if let Some(e) = e.downcast_ref::<$t>() {
                 return e.outcome().map(|o| match o {
+                    Outcome::Range => Class::Usage,
                     Outcome::Input => Class::Input,
                     Outcome::NoSignal => Class::NoSignal,
                     Outcome::Device => Class::Device,
@@ -93,22 +125,48 @@ fn library_class(e: &(dyn std::error::Error + 'static)) -> Option<Class> {
             })+
         };
     }
+    // Every error type of the library with a `Classify` impl (the test
+    // `exit_statuses::every_library_error_has_a_class` keeps this whole).
     outcome_of!(
-        mfd::live::MeasurementError,
-        mfd::live::LiveError,
-        mfd::acquire::camera::CameraError,
-        mfd::acquire::display::DisplayError,
         mfd::acquire::acquisition::AcquisitionError,
-        mfd::solve::surfaces::SurfaceError,
-        mfd::solve::spectral::SpectralError,
-        mfd::pipeline::PipelineError,
+        mfd::acquire::camera::CameraError,
+        mfd::acquire::camera::convert::RangeError,
+        mfd::acquire::camera::convert::SizeError,
+        mfd::acquire::display::DisplayError,
+        mfd::acquire::patterns::ScheduleError,
+        mfd::acquire::schedule_file::ScheduleFileError,
+        mfd::budget::picture::PictureError,
+        mfd::budget::refine::RefineError,
+        mfd::budget::scene::BudgetError,
+        mfd::calibrate::centroid::CentroidError,
+        mfd::calibrate::error::CalibrationError,
+        mfd::calibrate::frame::FrameError,
+        mfd::calibrate::from_session::SessionSolveError,
+        mfd::calibrate::make::MakeError,
+        mfd::calibrate::session::SessionError,
+        mfd::compare::CompareError,
+        mfd::console::ConsoleError,
+        mfd::console::preview::PreviewError,
+        mfd::formats::image_io::ImageError,
+        mfd::formats::npy::NpyError,
+        mfd::formats::surfaces_file::SurfacesFileError,
+        mfd::formats::surfaces_file::SurfacesOrFlatError,
+        mfd::live::LiveError,
+        mfd::live::MeasurementError,
         mfd::optics::station::StationError,
         mfd::optics::station::UncertaintyError,
-        mfd::acquire::schedule_file::ScheduleFileError,
-        mfd::acquire::patterns::ScheduleError,
-        mfd::formats::surfaces_file::SurfacesFileError,
-        mfd::formats::image_io::ImageError,
-        mfd::calibrate::session::SessionError,
+        mfd::optics::zernike::ZernikeError,
+        mfd::pipeline::PipelineError,
+        mfd::plan::PlanError,
+        mfd::report::page::ReportError,
+        mfd::sim::SimError,
+        mfd::solve::direct::run::DirectError,
+        mfd::solve::spectral::FeedError,
+        mfd::solve::spectral::phase::curve::CurveError,
+        mfd::solve::spectral::phase::curve::ProfileResponseError,
+        mfd::solve::spectral::statistics::StatisticsError,
+        mfd::solve::spectral::SpectralError,
+        mfd::solve::surfaces::SurfaceError,
     );
     None
 }

@@ -3,9 +3,7 @@
 
 use std::path::Path;
 
-use mfd::pipeline::{
-    FoundUncertainty, PipelineError, Reconstruction, Staged, SurfaceStage, UncertaintySource,
-};
+use mfd::pipeline::{FoundUncertainty, Reconstruction, Staged, SurfaceStage, UncertaintySource};
 
 use super::exit::{classified, Class};
 use mfd::solve::spectral::{PixelFlags, SpectralMaps};
@@ -23,14 +21,17 @@ pub fn write_and_print(
     out: &Path,
     checks: &super::CheckArgs,
 ) -> anyhow::Result<()> {
-    let staged = Staged::begin(out).map_err(pipeline_error)?;
+    let staged = Staged::begin(out)?;
     if let Err(e) = rec.write(staged.path()) {
         let msg = e.to_string();
         let kept = staged.fail(&msg)?;
-        return Err(anyhow::anyhow!(
-            "{msg}; {} is unchanged; what this run wrote is in {}",
-            out.display(),
-            kept.display()
+        return Err(super::exit::like(
+            &e,
+            format!(
+                "{msg}; {} is unchanged; what this run wrote is in {}",
+                out.display(),
+                kept.display()
+            ),
         ));
     }
     if let Some(s) = &rec.spectral {
@@ -40,11 +41,15 @@ pub fn write_and_print(
     if let Some(Err(e)) = &rec.surfaces {
         let msg = format!("surface stage: {e}");
         let kept = staged.fail(&msg)?;
-        return Err(anyhow::anyhow!(
-            "{msg}; {} is unchanged (the previous result, if any); this run's spectral maps \
-             are in {}",
-            out.display(),
-            kept.display()
+        // With the surface error's class (too few points: no signal).
+        return Err(super::exit::like(
+            e,
+            format!(
+                "{msg}; {} is unchanged (the previous result, if any); this run's spectral \
+                 maps are in {}",
+                out.display(),
+                kept.display()
+            ),
         ));
     }
     staged.commit()?;
@@ -67,21 +72,6 @@ pub fn write_and_print(
         )),
         _ => Ok(()),
     }
-}
-
-/// A pipeline error with the exit class of its kind: bad input files and
-/// result folders, data with nothing to measure, the rest failures.
-pub fn pipeline_error(e: PipelineError) -> anyhow::Error {
-    let class = match &e {
-        PipelineError::NoSignal(_) => Class::NoSignal,
-        PipelineError::Output { .. }
-        | PipelineError::Acquisition(_)
-        | PipelineError::Shape { .. }
-        | PipelineError::Uncertainty(_)
-        | PipelineError::UncertaintyOfAnotherStation { .. } => Class::Input,
-        _ => Class::Failure,
-    };
-    classified(class, e.into())
 }
 
 fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {

@@ -42,19 +42,19 @@ pub struct PlanArgs {
     #[arg(long)]
     json: Option<PathBuf>,
     /// Read noise, fraction of full scale, as `mfd simulate --noise`.
-    #[arg(long, value_parser = super::check::non_negative, default_value_t = 0.05)]
+    #[arg(long, value_parser = super::check::noise_fraction, default_value_t = 0.05)]
     noise: f64,
     /// Modulation falloff τ_max, as `mfd simulate --tau-max`.
     #[arg(long, value_parser = super::check::positive, default_value_t = 150.0)]
     tau_max: f64,
     /// The camera's bits per sample.
-    #[arg(long, value_parser = super::check::bit_depth, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::sim_bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Ambient light, as `mfd simulate --ambient`.
     #[arg(long, value_parser = super::check::fraction, default_value_t = 0.01)]
     ambient: f64,
     /// Zernike terms per surface.
-    #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 36)]
+    #[arg(long, value_parser = super::check::budget_terms, default_value_t = 36)]
     terms: usize,
     /// The element's thickness, mm (default: the station's).
     #[arg(long, value_parser = super::check::positive)]
@@ -222,11 +222,6 @@ fn plan_options(args: &PlanArgs) -> anyhow::Result<PlanOptions> {
             ..mfd::solve::spectral::SpectralConfig::default()
         },
     };
-    anyhow::ensure!(
-        [8, 12, 16].contains(&args.bit_depth),
-        "--bit-depth {}: expected 8, 12 or 16",
-        args.bit_depth
-    );
     opts.validate()?;
     Ok(opts)
 }

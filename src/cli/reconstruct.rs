@@ -87,7 +87,9 @@ pub struct ReconstructArgs {
 /// Runs `mfd reconstruct`.
 pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
     if args.roi.as_ref().is_some_and(|r| r.len() != 4) {
-        anyhow::bail!("--roi takes four numbers x0,y0,x1,y1");
+        return Err(super::exit::usage(anyhow::anyhow!(
+            "--roi takes four numbers x0,y0,x1,y1"
+        )));
     }
     if let Some(&[x0, y0, x1, y1]) = args.roi.as_deref() {
         anyhow::ensure!(
@@ -143,14 +145,14 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         &mut |done, _| bar.set_position(done as u64),
     );
     bar.finish_and_clear();
-    let mut rec = result.map_err(super::output::pipeline_error)?;
+    let mut rec = result?;
     let mut inputs = Inputs::new();
     inputs.acquisition = Some(InputFile {
         path: acq_dir.display().to_string(),
-        sha256: sha256_file(acq.manifest_path()).map_err(super::output::pipeline_error)?,
+        sha256: sha256_file(acq.manifest_path())?,
     });
     inputs.frames = Some(acq.frames().len());
-    inputs.station = Some(InputFile::of(&station_path).map_err(super::output::pipeline_error)?);
+    inputs.station = Some(InputFile::of(&station_path)?);
     inputs.uncertainty =
         uncertainty_path(args, &station_path, options.station_uncertainty.is_some());
     rec.inputs = Some(inputs);
@@ -163,7 +165,9 @@ fn from_screen_coords(
     surfaces: Option<mfd::solve::surfaces::SurfaceOptions>,
 ) -> anyhow::Result<()> {
     let (Some(coords_path), Some(station_path)) = (&args.screen_coords, &args.station) else {
-        anyhow::bail!("give an acquisition folder, or --screen-coords with --station");
+        return Err(super::exit::usage(anyhow::anyhow!(
+            "give an acquisition folder, or --screen-coords with --station"
+        )));
     };
     let station = Station::load(station_path)?;
     let station_uncertainty = uncertainty(args, station_path, &station, surfaces.is_some())?;
@@ -183,11 +187,10 @@ fn from_screen_coords(
         &station,
         &options,
         &mut |_, _| {},
-    )
-    .map_err(super::output::pipeline_error)?;
+    )?;
     let mut inputs = Inputs::new();
-    inputs.screen_coords = Some(InputFile::of(coords_path).map_err(super::output::pipeline_error)?);
-    inputs.station = Some(InputFile::of(station_path).map_err(super::output::pipeline_error)?);
+    inputs.screen_coords = Some(InputFile::of(coords_path)?);
+    inputs.station = Some(InputFile::of(station_path)?);
     inputs.uncertainty =
         uncertainty_path(args, station_path, options.station_uncertainty.is_some());
     rec.inputs = Some(inputs);

@@ -47,7 +47,10 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         } else {
             dir.clone()
         };
-        anyhow::ensure!(dir.is_dir(), "{}: not a folder", dir.display());
+        anyhow::ensure!(
+            dir.is_dir(),
+            super::exit::input(anyhow::anyhow!("{}: not a folder", dir.display()))
+        );
         let name = name_of(&dir);
         console.add_results(&name, &dir);
     }

@@ -58,7 +58,7 @@ pub struct SimulateArgs {
     #[arg(long, value_parser = super::check::positive)]
     gain: Option<f64>,
     /// Bits per sample: 8, 12 or 16.
-    #[arg(long, value_parser = super::check::bit_depth, default_value_t = 16)]
+    #[arg(long, value_parser = super::check::sim_bit_depth, default_value_t = 16)]
     bit_depth: u32,
     /// Seed of the camera noise.
     #[arg(long, default_value_t = 1)]
@@ -131,7 +131,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     };
     anyhow::ensure!(
         args.display_gamma.is_none() || args.falloff == mfd::sim::Falloff::Tau,
-        "--falloff screen-period: the phase-shifting renderer (--display-gamma) has its own falloff; give one or the other"
+        super::exit::usage(anyhow::anyhow!("--falloff screen-period: the phase-shifting renderer (--display-gamma) has its own falloff; give one or the other"))
     );
     let report = match args.display_gamma {
         Some(gamma) => {

@@ -9,12 +9,12 @@ use mfd::solve::surfaces::SurfaceOptions;
 /// Options of the surface stage.
 #[derive(Args, Clone, Debug)]
 pub struct SurfaceArgs {
-    /// Zernike terms per surface (Noll 1..=N, up to 231); default: chosen
-    /// by the Bayesian information criterion up to --max-terms.
-    #[arg(long, value_parser = super::check::int_range(1usize, 231, "Noll terms the surfaces support"))]
+    /// Zernike terms per surface (Noll 1..=N, N from 3 to 231); default:
+    /// chosen by the Bayesian information criterion up to --max-terms.
+    #[arg(long, value_parser = super::check::terms)]
     pub terms: Option<usize>,
-    /// Largest model the term choice considers.
-    #[arg(long, value_parser = super::check::int_range(1usize, 231, "Noll terms the surfaces support"), default_value_t = 66)]
+    /// Largest model the term choice considers (3 to 231).
+    #[arg(long, value_parser = super::check::terms, default_value_t = 66)]
     pub max_terms: usize,
     /// Levenberg–Marquardt iteration limit per stage.
     #[arg(long, value_parser = super::check::positive_int::<usize>, default_value_t = 30)]
@@ -39,27 +39,14 @@ pub struct SurfaceArgs {
 }
 
 impl SurfaceArgs {
-    /// The estimator and the reporting limit, checked.
+    /// The estimator and the reporting limit (checked where parsed).
     pub fn estimator(&self) -> anyhow::Result<(mfd::pipeline::Estimator, Option<f64>)> {
-        if let Some(l) = self.max_expected_nm {
-            anyhow::ensure!(
-                l.is_finite() && l > 0.0,
-                "--max-expected-nm {l}: must be a positive number of nm"
-            );
-        }
         Ok((self.estimator, self.max_expected_nm))
     }
 
-    /// The solver options these arguments ask for.
+    /// The solver options these arguments ask for (their ranges checked
+    /// where parsed).
     pub fn options(&self, edge_margin_mm: f64) -> anyhow::Result<SurfaceOptions> {
-        if let Some(t) = self.terms {
-            anyhow::ensure!((3..=231).contains(&t), "--terms {t}: must be 3..=231");
-        }
-        anyhow::ensure!(
-            (3..=231).contains(&self.max_terms),
-            "--max-terms {}: must be 3..=231",
-            self.max_terms
-        );
         Ok(SurfaceOptions {
             terms: self.terms,
             max_terms: self.max_terms,

@@ -38,7 +38,7 @@ pub struct TradeoffArgs {
     #[arg(long, value_parser = super::check::positive_int::<usize>, value_delimiter = ',', default_value = "50,100,200,400")]
     frames: Vec<usize>,
     /// Zernike terms per surface.
-    #[arg(long, value_parser = super::check::int_range(1usize, 231, "Noll terms the surfaces support"), value_delimiter = ',', default_value = "15,36,66")]
+    #[arg(long, value_parser = super::check::terms, value_delimiter = ',', default_value = "15,36,66")]
     terms: Vec<usize>,
     /// Iteration limits (spectral and surface Levenberg–Marquardt alike).
     #[arg(long, value_parser = super::check::positive_int::<usize>, value_delimiter = ',', default_value = "3,30")]

@@ -122,3 +122,20 @@ pub enum CompareError {
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
 }
+
+impl crate::outcome::Classify for CompareError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            CompareError::Io { source, .. } => crate::outcome::io_outcome(source),
+            CompareError::Npy(e) => e.outcome(),
+            CompareError::Surfaces(e) => e.outcome(),
+            // Drawing a picture: a failure of its own (exit 1).
+            CompareError::Plot(_) => None,
+            CompareError::Fit { source, .. } => source.outcome(),
+            // Every other variant names the map or surfaces file and what
+            // in it (or in the registration options) is not valid.
+            _ => Some(Outcome::Input),
+        }
+    }
+}

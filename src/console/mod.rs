@@ -55,3 +55,14 @@ pub enum ConsoleError {
         source: std::io::Error,
     },
 }
+
+impl crate::outcome::Classify for ConsoleError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            // The address asked for (--addr, --serve) cannot be listened on.
+            ConsoleError::Bind { .. } => Some(Outcome::Input),
+            ConsoleError::Runtime { .. } => None,
+        }
+    }
+}

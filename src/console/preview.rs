@@ -43,6 +43,13 @@ pub enum PreviewError {
     },
 }
 
+impl crate::outcome::Classify for PreviewError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        // Encoding a preview: a failure of its own (exit 1).
+        None
+    }
+}
+
 /// What the page gets for one frame (`GET /api/preview`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Preview {

@@ -371,6 +371,19 @@ pub enum SurfacesOrFlatError {
     Flat(#[source] ZernikeError),
 }
 
+impl crate::outcome::Classify for SurfacesOrFlatError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            SurfacesOrFlatError::File(e) => e.outcome(),
+            // The file's `zernike` block, or the station's aperture.
+            SurfacesOrFlatError::Build { .. } | SurfacesOrFlatError::Flat(_) => {
+                Some(Outcome::Input)
+            }
+        }
+    }
+}
+
 /// Front and back surfaces from a `surfaces.json` (`mfd-surfaces/1` or
 /// `/2`; a `null` surface is flat), or flat surfaces over the station's
 /// aperture when none is given: the expected surfaces of a simulation, a

@@ -89,7 +89,11 @@ impl crate::outcome::Classify for MeasurementError {
             MeasurementError::ResumeMismatch { .. } | MeasurementError::Resolution { .. } => {
                 Some(Outcome::Input)
             }
-            _ => None,
+            // Transparent: the inner error is not in the source chain.
+            MeasurementError::Camera(e) => e.outcome(),
+            MeasurementError::Acquisition(e) => e.outcome(),
+            MeasurementError::Spectral(e) => e.outcome(),
+            MeasurementError::Run { source, .. } => source.outcome(),
         }
     }
 }

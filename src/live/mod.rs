@@ -127,7 +127,13 @@ impl crate::outcome::Classify for LiveError {
         use crate::outcome::Outcome;
         match self {
             LiveError::Reshoots { .. } | LiveError::FrameSize { .. } => Some(Outcome::Device),
-            _ => None,
+            LiveError::Camera { source, .. } => source.outcome(),
+            LiveError::Display { source, .. } => source.outcome(),
+            LiveError::Acquisition(e) => e.outcome(),
+            // A consumer's error is in the chain (downcast by the binary).
+            LiveError::Sink { .. } | LiveError::SinkFinish { .. } | LiveError::Panicked { .. } => {
+                None
+            }
         }
     }
 }

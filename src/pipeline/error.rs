@@ -100,8 +100,21 @@ impl crate::outcome::Classify for PipelineError {
     fn outcome(&self) -> Option<crate::outcome::Outcome> {
         use crate::outcome::Outcome;
         match self {
-            PipelineError::UncertaintyOfAnotherStation { .. } => Some(Outcome::Input),
-            _ => None,
+            // A transparent variant's inner error is not in the source
+            // chain (thiserror hands on the inner's own source): ask it.
+            PipelineError::Acquisition(e) => e.outcome(),
+            PipelineError::Spectral(e) => e.outcome(),
+            PipelineError::Npy(e) => e.outcome(),
+            PipelineError::SurfacesFile(e) => e.outcome(),
+            PipelineError::Uncertainty(e) => e.outcome(),
+            PipelineError::Station(e) => e.outcome(),
+            PipelineError::NoSignal(_) => Some(Outcome::NoSignal),
+            PipelineError::Shape { .. }
+            | PipelineError::Output { .. }
+            | PipelineError::UncertaintyOfAnotherStation { .. } => Some(Outcome::Input),
+            // Writing the result or a picture of it: a failure of its own
+            // (exit 1; `plot` stands below `outcome`'s users, unclassed).
+            PipelineError::Io { .. } | PipelineError::Json { .. } | PipelineError::Plot(_) => None,
         }
     }
 }

@@ -64,6 +64,23 @@ pub enum PlanError {
     },
 }
 
+impl crate::outcome::Classify for PlanError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            // An option's value (`input` names it: `--frames`) the plan
+            // cannot take is a bad command line; the schedule's or the
+            // design's own troubles are input that is not valid.
+            PlanError::Invalid { input, .. } if input.starts_with("--") => Some(Outcome::Range),
+            PlanError::Invalid { .. } => Some(Outcome::Input),
+            PlanError::Budget(e) => e.outcome(),
+            PlanError::Surface(e) => e.outcome(),
+            PlanError::Station(e) => e.outcome(),
+            PlanError::Io { source, .. } => crate::outcome::io_outcome(source),
+        }
+    }
+}
+
 pub(crate) fn invalid(input: impl Into<String>, problem: impl Into<String>) -> PlanError {
     PlanError::Invalid {
         input: input.into(),

@@ -81,6 +81,21 @@ pub enum SimError {
     },
 }
 
+impl crate::outcome::Classify for SimError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            SimError::Invalid { .. } => Some(Outcome::Input),
+            SimError::Acquisition(e) => e.outcome(),
+            SimError::Npy(e) => e.outcome(),
+            SimError::Station(e) => e.outcome(),
+            SimError::Image(e) => e.outcome(),
+            SimError::Surfaces(e) => e.outcome(),
+            SimError::Io { source, .. } => crate::outcome::io_outcome(source),
+        }
+    }
+}
+
 /// Figures of a finished simulation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimulationReport {

@@ -39,6 +39,7 @@ mod console_browser;
 mod console_cli;
 mod console_http;
 mod direct_thin;
+mod exit_statuses;
 mod flat_plate;
 mod fuzz_readers;
 mod input_ranges;

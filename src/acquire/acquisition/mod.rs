@@ -100,6 +100,7 @@ impl crate::outcome::Classify for AcquisitionError {
         match self {
             AcquisitionError::Io { source, .. } => crate::outcome::io_outcome(source),
             AcquisitionError::Serialize { .. } => None,
+            AcquisitionError::Stack(e) => e.outcome(),
             _ => Some(Outcome::Input),
         }
     }

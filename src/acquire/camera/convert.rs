@@ -24,6 +24,14 @@ pub struct SizeError {
     pub found: usize,
 }
 
+impl crate::outcome::Classify for SizeError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        // A buffer from the camera shorter than its format says.
+        Some(Outcome::Device)
+    }
+}
+
 /// Frame layout in a driver buffer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Layout {
@@ -133,6 +141,14 @@ pub struct RangeError {
     pub min: i64,
     /// Largest device value.
     pub max: i64,
+}
+
+impl crate::outcome::Classify for RangeError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        // A setting asked for (exposure, gain) outside the device's range.
+        Some(Outcome::Input)
+    }
 }
 
 fn snap(

@@ -20,7 +20,7 @@ pub struct BudgetBenchArgs {
     #[arg(long, default_value = "calib/paper-sim.toml")]
     station: PathBuf,
     /// Zernike terms of the truth and of the fit.
-    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 150)]
+    #[arg(long, value_parser = crate::cli::check::terms, default_value_t = 150)]
     terms: usize,
     /// σ of S1 and S2 per coordinate, screen px (as `bench surfaces`).
     #[arg(long, value_parser = crate::cli::check::positive, num_args = 2, default_values_t = [0.110, 0.121])]
@@ -50,7 +50,6 @@ fn paper_order_std(d: Dof) -> f64 {
 
 /// Runs the benchmark.
 pub fn run(args: &BudgetBenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!((3..=231).contains(&args.terms), "--terms must be 3..=231");
     let station = Station::load(&args.station)?;
     let e = &station.element;
     let spec = RandomSurfaceSpec {

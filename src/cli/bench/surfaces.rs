@@ -24,7 +24,7 @@ pub struct SurfaceBenchArgs {
     #[arg(long, default_value = "calib/paper-sim.toml")]
     station: PathBuf,
     /// Zernike terms of the truth and of the fit.
-    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 150)]
+    #[arg(long, value_parser = crate::cli::check::terms, default_value_t = 150)]
     terms: usize,
     /// σ of S1 per coordinate, screen px. The default is what the spectral
     /// solver achieved on this station (2000 frames, 12 bit, 5 % noise):
@@ -44,7 +44,6 @@ pub struct SurfaceBenchArgs {
 
 /// Runs the benchmark.
 pub fn run(args: &SurfaceBenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!((3..=231).contains(&args.terms), "--terms must be 3..=231");
     let station = Station::load(&args.station)?;
     let e = &station.element;
     let spec = RandomSurfaceSpec {

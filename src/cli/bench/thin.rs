@@ -48,7 +48,7 @@ pub struct ThinArgs {
     #[arg(long, value_parser = crate::cli::check::positive_int::<usize>, default_value_t = 15)]
     truth_terms: usize,
     /// Terms fitted; default: the estimators choose (BIC).
-    #[arg(long, value_parser = crate::cli::check::positive_int::<usize>)]
+    #[arg(long, value_parser = crate::cli::check::terms)]
     terms: Option<usize>,
     /// Seeds of the noise (one acquisition each).
     #[arg(long, value_delimiter = ',', default_values_t = [5])]

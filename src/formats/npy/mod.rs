@@ -64,6 +64,16 @@ pub enum NpyError {
     },
 }
 
+impl crate::outcome::Classify for NpyError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            NpyError::Io { source, .. } => crate::outcome::io_outcome(source),
+            _ => Some(Outcome::Input),
+        }
+    }
+}
+
 /// Element types of camera frame stacks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StackDtype {

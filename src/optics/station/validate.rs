@@ -248,6 +248,38 @@ fn distortion(
     Ok(Some(dist))
 }
 
+/// The widest angle from the optical axis, degrees, at which a station's
+/// camera may see the corner of its sensor. The station's camera is a
+/// central projection (with a small distortion): a rectilinear lens. At
+/// 80° the image of a ray is already 5.7 focal lengths off axis
+/// (tan 80°); the widest rectilinear lenses made stay below that, and a
+/// wider view is a fisheye, whose mapping the model does not describe.
+pub const MAX_HALF_FIELD_DEG: f64 = 80.0;
+
+/// The focal length against the sensor it images: the half diagonal must
+/// be seen within [`MAX_HALF_FIELD_DEG`] of the axis. A focal length far
+/// too short (a unit slip: 1e-9 mm) is named here, before the distortion's
+/// checks see its consequences.
+fn field_of_view(check: &Check, c: &super::file::CameraFile) -> Result<(), StationError> {
+    let [w, h] = c.resolution.map(f64::from);
+    let half_diagonal_mm = 0.5 * w.hypot(h) * c.pixel_pitch_um * 1e-3;
+    let half_field_deg = half_diagonal_mm.atan2(c.focal_length_mm).to_degrees();
+    if half_field_deg <= MAX_HALF_FIELD_DEG {
+        return Ok(());
+    }
+    let shortest = half_diagonal_mm / MAX_HALF_FIELD_DEG.to_radians().tan();
+    check.fail(
+        "camera.focal_length_mm",
+        format!(
+            "{:?} mm: the sensor's corner ({half_diagonal_mm:.2} mm from its centre) would be \
+             {half_field_deg:.1}° off the axis, beyond the {MAX_HALF_FIELD_DEG}° a \
+             rectilinear lens images; with this sensor the focal length must be at least \
+             {shortest:.2} mm (is it in mm?)",
+            c.focal_length_mm
+        ),
+    )
+}
+
 fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
     let c = &file.camera;
     check.finite("camera.position_mm", &c.position_mm)?;
@@ -269,6 +301,7 @@ fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
     check.positive("camera.focal_length_mm", c.focal_length_mm)?;
     check.positive("camera.pixel_pitch_um", c.pixel_pitch_um)?;
     check.resolution("camera.resolution", c.resolution, &SENSOR_LIMIT)?;
+    field_of_view(check, c)?;
     let [w, h] = c.resolution;
     let pp = c
         .principal_point_px

@@ -87,3 +87,24 @@ pub enum ZernikeError {
         condition_number: f64,
     },
 }
+
+impl crate::outcome::Classify for ZernikeError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            // Indices, orders, radii, centres and term counts come from
+            // files and options; non-finite values from the data.
+            ZernikeError::InvalidIndex { .. }
+            | ZernikeError::InvalidOrder { .. }
+            | ZernikeError::InvalidRadius { .. }
+            | ZernikeError::InvalidCenter { .. }
+            | ZernikeError::InvalidTermCount { .. }
+            | ZernikeError::NonFinite { .. } => Some(Outcome::Input),
+            ZernikeError::TooFewPoints { .. } => Some(Outcome::NoSignal),
+            // Lengths and weights are the program's own: a bug.
+            ZernikeError::LengthMismatch { .. }
+            | ZernikeError::InvalidWeight { .. }
+            | ZernikeError::IllConditioned { .. } => None,
+        }
+    }
+}

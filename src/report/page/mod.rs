@@ -61,6 +61,14 @@ pub enum ReportError {
         /// The folder.
         dir: PathBuf,
     },
+    /// A file or folder the report needs is not there.
+    #[error("{path}: not there: {why}")]
+    Missing {
+        /// The file or folder.
+        path: PathBuf,
+        /// Why the report needs it and what to do.
+        why: String,
+    },
     /// An array could not be read.
     #[error(transparent)]
     Npy(#[from] crate::formats::npy::NpyError),
@@ -79,6 +87,27 @@ pub enum ReportError {
     /// The comparison's pictures could not be drawn.
     #[error(transparent)]
     Compare(#[from] crate::compare::CompareError),
+}
+
+impl crate::outcome::Classify for ReportError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            ReportError::Io { source, .. } => crate::outcome::io_outcome(source),
+            // A result file that is not what its name says, or no result.
+            ReportError::Json { .. }
+            | ReportError::Shape { .. }
+            | ReportError::NoResult { .. }
+            | ReportError::Missing { .. } => Some(Outcome::Input),
+            ReportError::Npy(e) => e.outcome(),
+            ReportError::Surfaces(e) => e.outcome(),
+            ReportError::Acquisition(e) => e.outcome(),
+            ReportError::Station(e) => e.outcome(),
+            ReportError::Compare(e) => e.outcome(),
+            // Drawing a picture: a failure of its own (exit 1).
+            ReportError::Plot(_) => None,
+        }
+    }
 }
 
 /// What to put beside the result folder's own content.
@@ -105,6 +134,7 @@ pub fn build(result: &Path, options: &ReportOptions) -> Result<String, ReportErr
             dir: result.to_path_buf(),
         });
     }
+    check_inputs(result, options)?;
     let context = Context::find(result, options.acquisition.as_deref())?;
     let summary = sections::load_summary(result)?;
     let written = ["summary.json", "surfaces.json", "screen_coords.npy"]
@@ -133,6 +163,38 @@ pub fn build(result: &Path, options: &ReportOptions) -> Result<String, ReportErr
     );
     context.calibration(&mut page, options.calibration.as_deref())?;
     Ok(page.finish())
+}
+
+/// Refuses what the page would otherwise present as fine: a calibration
+/// folder given that is not one (the page would say "no calibration
+/// report" as if none had been asked for), and a result whose
+/// `surfaces.json`, the result itself, is not valid, or missing where
+/// `summary.json` describes its surfaces (the page's figures would be of
+/// a result that is not there).
+fn check_inputs(result: &Path, options: &ReportOptions) -> Result<(), ReportError> {
+    if let Some(dir) = &options.calibration {
+        if !dir.join("report.json").is_file() {
+            return Err(ReportError::Missing {
+                path: dir.join("report.json"),
+                why: "--calibration names the folder `mfd calibrate solve --out` wrote (its \
+                      report.json, targets.png, flat_residuals.png); give that folder, or leave \
+                      --calibration out"
+                    .into(),
+            });
+        }
+    }
+    let surfaces = result.join("surfaces.json");
+    if surfaces.is_file() {
+        crate::formats::surfaces_file::SurfacesFile::load(&surfaces)?;
+    } else if result.join("summary.json").is_file() {
+        return Err(ReportError::Missing {
+            path: surfaces,
+            why: "summary.json describes the surfaces this file holds: the result folder is \
+                  incomplete; reconstruct again into a new --out folder"
+                .into(),
+        });
+    }
+    Ok(())
 }
 
 /// Writes the report of `result` to `out` (default `RESULT/report.html`);

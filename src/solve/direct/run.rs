@@ -55,6 +55,17 @@ pub enum DirectError {
     Surface(#[from] SurfaceError),
 }
 
+impl crate::outcome::Classify for DirectError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            // `--estimator direct` where the data do not allow it.
+            DirectError::NotApplicable { .. } => Some(Outcome::Input),
+            DirectError::Surface(e) => e.outcome(),
+        }
+    }
+}
+
 /// One outer iteration's account.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Iteration {

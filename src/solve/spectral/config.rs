@@ -82,8 +82,14 @@ impl crate::outcome::Classify for SpectralError {
         match self {
             SpectralError::Schedule { .. }
             | SpectralError::Config { .. }
-            | SpectralError::Statistics { .. } => Some(Outcome::Input),
-            _ => None,
+            | SpectralError::Statistics { .. }
+            // The element's aperture is the station file's; a frame out
+            // of order, missing or of another size is the acquisition's.
+            | SpectralError::Aperture { .. }
+            | SpectralError::Frame { .. } => Some(Outcome::Input),
+            SpectralError::Npy(e) => e.outcome(),
+            // The backend or the prior disagreeing with the solver is a bug.
+            SpectralError::Backend { .. } | SpectralError::Prior { .. } => None,
         }
     }
 }

@@ -20,6 +20,15 @@ pub enum FeedError {
     Push(#[from] SpectralError),
 }
 
+impl crate::outcome::Classify for FeedError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        match self {
+            FeedError::Read(e) => e.outcome(),
+            FeedError::Push(e) => e.outcome(),
+        }
+    }
+}
+
 impl FeedError {
     /// The cause as the caller's own error, for an error type that holds
     /// both a reading and a solver failure.

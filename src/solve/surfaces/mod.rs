@@ -68,7 +68,8 @@ impl crate::outcome::Classify for SurfaceError {
         match self {
             SurfaceError::TooFewPoints { .. } => Some(Outcome::NoSignal),
             SurfaceError::Input { .. } => Some(Outcome::Input),
-            _ => None,
+            SurfaceError::Zernike(e) => e.outcome(),
+            SurfaceError::IllConditioned { .. } => None,
         }
     }
 }

@@ -32,6 +32,16 @@ pub enum ProfileResponseError {
     },
 }
 
+impl crate::outcome::Classify for ProfileResponseError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        match self {
+            ProfileResponseError::Profile(e) => e.outcome(),
+            ProfileResponseError::Curve { .. } => Some(Outcome::Input),
+        }
+    }
+}
+
 /// A display profile (`hw/display/*.toml`) and its measured response,
 /// where it has one.
 ///
@@ -66,6 +76,14 @@ pub struct CurveError {
     pub row: usize,
     /// What is wrong and what to do.
     pub problem: String,
+}
+
+impl crate::outcome::Classify for CurveError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        // A row of a display profile's `response` table.
+        Some(Outcome::Input)
+    }
 }
 
 /// A validated response: levels normalised to `[0, 1]` (the last row is

@@ -85,6 +85,14 @@ pub enum StatisticsError {
     },
 }
 
+impl crate::outcome::Classify for StatisticsError {
+    fn outcome(&self) -> Option<crate::outcome::Outcome> {
+        use crate::outcome::Outcome;
+        // The band asked for (--band-bins) against the falloff.
+        Some(Outcome::Input)
+    }
+}
+
 /// The running sufficient statistics of every candidate pixel.
 pub struct Statistics {
     tables: StatisticsTables,
