@@ -2,9 +2,11 @@
 //! `chromium`, as `scripts/install-deps.sh` installs it) during a simulated
 //! measurement: the page's own state (`window.mfdConsole`) must show the
 //! preview and the progress moving, the canvas must hold the frame's pixels
-//! (not a blank page), the stop button must stop the run as Ctrl-C does,
-//! and a result picture must appear; a screenshot is written under the
-//! test's temporary folder (and copied to `$MFD_CONSOLE_SCREENSHOT` when set).
+//! (not a blank page), the stop button must stop the run as Ctrl-C does
+//! (the page sending its token), a result picture must appear, and the
+//! content security policy must block nothing of the page's own; a
+//! screenshot is written under the test's temporary folder (and copied to
+//! `$MFD_CONSOLE_SCREENSHOT` when set).
 
 use crate::console_support;
 
