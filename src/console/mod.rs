@@ -16,8 +16,16 @@
 //!
 //! Bound to a loopback address the console serves anyone on this machine;
 //! on any other address every request needs the token [`serve`] draws
-//! (`401` without it).
+//! (`401` without it). Either way it refuses what another site's page could
+//! make a browser send (`console/guard.rs`): a foreign `Host` (DNS
+//! rebinding), a foreign `Origin` (cross-site fetch, form or WebSocket), and
+//! a state-changing request without the token the page holds in
+//! `X-Mfd-Token`. The page builds its DOM from data as text only, under
+//! `Content-Security-Policy: default-src 'self'`, and a result folder's
+//! files are served so that none runs in the console's origin
+//! ([`result_file`]).
 
+mod guard;
 mod page;
 pub mod preview;
 pub mod probe;
@@ -28,7 +36,7 @@ mod state;
 use std::net::SocketAddr;
 
 pub use preview::{Encoded, Preview, PreviewError};
-pub use results::{list_results, result_file, ResultFile, ResultListing};
+pub use results::{list_results, result_file, ResultFile, ResultListing, Served};
 pub use server::{serve, ConsoleHandle};
 pub use state::{Console, Mode, Progress, ResultDir, Showing, Spectral, Stage, Status};
 

@@ -1,6 +1,7 @@
 //! The page and everything it loads, embedded in the binary: the console
 //! works without a network beyond the link to mfd (no CDN, no web font
-//! service; the font is the DejaVu Sans the pictures use).
+//! service; the font is the DejaVu Sans the pictures use). No script or
+//! style is inline: the policy (`default-src 'self'`) forbids it.
 
 use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
@@ -18,9 +19,18 @@ fn with_type(body: impl IntoResponse, kind: &'static str) -> Response {
     r
 }
 
-/// `GET /`.
-pub fn index() -> Response {
-    with_type(INDEX, "text/html; charset=utf-8")
+/// Where `index.html` takes the process's token.
+const TOKEN_SLOT: &str = "{{MFD_TOKEN}}";
+
+/// `GET /`, holding `token` (hexadecimal: nothing to escape) for the
+/// script's state-changing requests. Never cached: a page kept from an
+/// earlier process would hold a token this one refuses.
+pub fn index(token: &str) -> Response {
+    debug_assert!(token.bytes().all(|b| b.is_ascii_hexdigit()));
+    let mut r = with_type(INDEX.replace(TOKEN_SLOT, token), "text/html; charset=utf-8");
+    r.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    r
 }
 
 /// `GET /console.js`.

@@ -3,14 +3,17 @@
 //!
 //! | route | what |
 //! |---|---|
-//! | `GET /` | the page (with `console.js`, `console.css`, `font.ttf`: nothing from elsewhere) |
+//! | `GET /` | the page (with `console.js`, `console.css`, `font.ttf`: nothing from elsewhere), holding this process's token |
 //! | `GET /api/state` | the [`Status`](super::Status) as JSON |
 //! | `GET /api/ws` | WebSocket: the status on connect and on every change (at most every 100 ms) |
 //! | `GET /api/preview?after=N&wait_ms=T` | the latest frame's [`Preview`](super::Preview) once one newer than `N` exists (204 after `T` ms without) |
 //! | `GET /api/frame.png?after=N&wait_ms=T` | the same frame's raw counts as PNG (`x-mfd-frame-index` header) |
-//! | `POST /api/stop` | stop as Ctrl-C does (202; 409 where nothing runs) |
-//! | `GET /api/results` | the result folders and their pictures and JSON files |
-//! | `GET /results/{dir}/{file}` | one of those files |
+//! | `POST /api/stop` | stop as Ctrl-C does (202; 409 where nothing runs); needs the token in `X-Mfd-Token` |
+//! | `GET /api/results` | the result folders and their files |
+//! | `GET /results/{dir}/{file}` | one of those files (PNG, JSON, CSV to view; the rest as downloads) |
+//!
+//! Every request passes `guard` (`console/guard.rs`) first (its `Host`,
+//! `Origin`, token), and every answer carries its headers.
 //!
 //! The preview is throttled by its client: the page asks for the next
 //! frame once it has drawn the last, and gets the latest one, so a slow
@@ -22,15 +25,16 @@ use std::time::Duration;
 
 use axum::body::Body;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{Path as UrlPath, Query, Request, State};
+use axum::extract::{Path as UrlPath, Query, State};
 use axum::http::{header, HeaderValue, StatusCode};
-use axum::middleware::{self, Next};
+use axum::middleware;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::Router;
 use serde::Deserialize;
 use tokio::sync::watch;
 
+use super::guard::{guard, Reached};
 use super::preview::{encode, Encoded};
 use super::results::{list_results, result_file};
 use super::state::Console;
@@ -42,10 +46,15 @@ const MAX_WAIT: Duration = Duration::from_secs(30);
 /// Shortest time between two status messages on one WebSocket.
 const STATUS_EVERY: Duration = Duration::from_millis(100);
 
+/// What every handler shares.
 #[derive(Clone)]
-struct App {
+pub(super) struct App {
     console: Console,
-    token: Option<Arc<str>>,
+    /// This process's token: the page's (`X-Mfd-Token` on state-changing
+    /// requests), and off loopback the one every request needs.
+    pub(super) token: Arc<str>,
+    /// Whether every request needs [`App::token`] (off loopback).
+    pub(super) token_everywhere: bool,
     closing: watch::Receiver<bool>,
     cache: Arc<Mutex<Option<Arc<Encoded>>>>,
 }
@@ -111,7 +120,8 @@ impl Drop for ConsoleHandle {
     }
 }
 
-/// A random token of 128 bits, hexadecimal.
+/// A random token of 128 bits, hexadecimal (from the operating system's
+/// generator through `rand`'s thread generator, drawn once per process).
 fn new_token() -> String {
     use rand::RngCore;
     let mut bytes = [0u8; 16];
@@ -120,14 +130,17 @@ fn new_token() -> String {
 }
 
 /// Starts the console on `addr`, serving `console`. A loopback address
-/// serves anyone on this machine; any other needs the token
-/// [`ConsoleHandle::token`] (print it for the operator).
+/// serves anyone on this machine who names it by its address or a loopback
+/// name; any other needs the token [`ConsoleHandle::token`] on every
+/// request (print it for the operator). Either way a state-changing request
+/// needs the token the page holds (see the `guard` module).
 ///
 /// # Errors
 /// [`ConsoleError::Bind`] when the address cannot be taken;
 /// [`ConsoleError::Runtime`] when the server thread cannot start.
 pub fn serve(addr: SocketAddr, console: Console) -> Result<ConsoleHandle, ConsoleError> {
-    let token = (!addr.ip().is_loopback()).then(new_token);
+    let token = new_token();
+    let token_everywhere = !addr.ip().is_loopback();
     let listener =
         std::net::TcpListener::bind(addr).map_err(|source| ConsoleError::Bind { addr, source })?;
     listener
@@ -145,7 +158,8 @@ pub fn serve(addr: SocketAddr, console: Console) -> Result<ConsoleHandle, Consol
     let (close, closing) = watch::channel(false);
     let app = App {
         console,
-        token: token.as_deref().map(Arc::from),
+        token: Arc::from(token.as_str()),
+        token_everywhere,
         closing: closing.clone(),
         cache: Arc::new(Mutex::new(None)),
     };
@@ -158,7 +172,7 @@ pub fn serve(addr: SocketAddr, console: Console) -> Result<ConsoleHandle, Consol
         .map_err(|source| ConsoleError::Runtime { source })?;
     Ok(ConsoleHandle {
         addr: local,
-        token,
+        token: token_everywhere.then_some(token),
         close: Some(close),
         thread: Some(thread),
     })
@@ -177,7 +191,8 @@ async fn run(listener: std::net::TcpListener, app: App, mut closing: watch::Rece
     let shutdown = async move {
         let _ = until.wait_for(|c| *c).await;
     };
-    let server = axum::serve(listener, router).with_graceful_shutdown(shutdown);
+    let service = router.into_make_service_with_connect_info::<Reached>();
+    let server = axum::serve(listener, service).with_graceful_shutdown(shutdown);
     tokio::select! {
         r = server => if let Err(e) = r { log::error!("console: {e}") },
         // Long polls and streams see `closing` too; give them a moment.
@@ -190,7 +205,7 @@ async fn run(listener: std::net::TcpListener, app: App, mut closing: watch::Rece
 
 fn router(app: App) -> Router {
     Router::new()
-        .route("/", get(|| async { page::index() }))
+        .route("/", get(index))
         .route("/console.js", get(|| async { page::script() }))
         .route("/console.css", get(|| async { page::style() }))
         .route("/font.ttf", get(|| async { page::font() }))
@@ -201,45 +216,12 @@ fn router(app: App) -> Router {
         .route("/api/stop", post(stop))
         .route("/api/results", get(results))
         .route("/results/{dir}/{file}", get(file))
-        .layer(middleware::from_fn_with_state(app.clone(), auth))
+        .layer(middleware::from_fn_with_state(app.clone(), guard))
         .with_state(app)
 }
 
-/// Whether `query` or the headers carry the token.
-fn carries(req: &Request, token: &str) -> bool {
-    let in_query = req.uri().query().is_some_and(|q| {
-        q.split('&')
-            .filter_map(|kv| kv.split_once('='))
-            .any(|(k, v)| k == "token" && same(v, token))
-    });
-    let in_header = req
-        .headers()
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .is_some_and(|v| same(v.trim(), token));
-    in_query || in_header
-}
-
-/// Equality that takes as long whatever the first difference.
-fn same(a: &str, b: &str) -> bool {
-    a.len() == b.len()
-        && a.bytes()
-            .zip(b.bytes())
-            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
-            == 0
-}
-
-async fn auth(State(app): State<App>, req: Request, next: Next) -> Response {
-    match &app.token {
-        Some(token) if !carries(&req, token) => (
-            StatusCode::UNAUTHORIZED,
-            "this console needs the token mfd printed when it started: open the address it \
-             printed (…/?token=…)\n",
-        )
-            .into_response(),
-        _ => next.run(req).await,
-    }
+async fn index(State(app): State<App>) -> Response {
+    page::index(&app.token)
 }
 
 async fn state(State(app): State<App>) -> Response {
@@ -382,12 +364,7 @@ async fn file(State(app): State<App>, UrlPath((dir, name)): UrlPath<(String, Str
     let dirs = app.console.result_dirs();
     let found = tokio::task::spawn_blocking(move || result_file(&dirs, &dir, &name)).await;
     match found {
-        Ok(Some((bytes, kind))) => {
-            let mut r = Response::new(Body::from(bytes));
-            r.headers_mut()
-                .insert(header::CONTENT_TYPE, HeaderValue::from_static(kind));
-            r
-        }
+        Ok(Some(served)) => served.into_response(),
         Ok(None) => (StatusCode::NOT_FOUND, "no such result file\n").into_response(),
         Err(e) => server_error(format!("reading a result file: {e}")),
     }

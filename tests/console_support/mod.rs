@@ -120,15 +120,35 @@ impl Answer {
 
 /// One request (`Connection: close`), `extra` header lines included.
 pub fn request(addr: SocketAddr, method: &str, path: &str, extra: &[&str]) -> Answer {
+    let host = format!("Host: {addr}");
+    send(
+        addr,
+        &format!("{method} {path} HTTP/1.1"),
+        &host,
+        extra,
+        b"",
+    )
+}
+
+/// One request: its first line, its `Host` line (empty: none), `extra`
+/// header lines and `body` (with its `Content-Length`).
+pub fn send(addr: SocketAddr, first: &str, host: &str, extra: &[&str], body: &[u8]) -> Answer {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    let mut head = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n");
-    for h in extra {
+    let mut head = format!("{first}\r\n");
+    for h in std::iter::once(&host)
+        .chain(extra)
+        .filter(|h| !h.is_empty())
+    {
         head.push_str(h);
         head.push_str("\r\n");
     }
-    head.push_str("Content-Length: 0\r\n\r\n");
+    head.push_str(&format!(
+        "Connection: close\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    ));
     s.write_all(head.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
     let mut raw = Vec::new();
     s.read_to_end(&mut raw).unwrap();
     let split = raw
@@ -173,6 +193,26 @@ fn dechunk(mut b: &[u8]) -> Vec<u8> {
 /// `GET path`.
 pub fn get(addr: SocketAddr, path: &str) -> Answer {
     request(addr, "GET", path, &[])
+}
+
+/// The token the console's page holds (its `<meta name="mfd-token">`).
+pub fn page_token(addr: SocketAddr) -> String {
+    let page = get(addr, "/");
+    assert_eq!(page.status, 200);
+    let html = String::from_utf8(page.body).unwrap();
+    let after = html
+        .split_once("<meta name=\"mfd-token\" content=\"")
+        .expect("the page holds a token")
+        .1;
+    after.split_once('"').unwrap().0.to_string()
+}
+
+/// `POST /api/stop` as the console's page sends it: its token in
+/// `X-Mfd-Token`, its own `Origin`.
+pub fn page_stop(addr: SocketAddr) -> Answer {
+    let token = format!("X-Mfd-Token: {}", page_token(addr));
+    let origin = format!("Origin: http://{addr}");
+    request(addr, "POST", "/api/stop", &[&token, &origin])
 }
 
 /// Decodes a PNG: (width, height, channels, bits, samples as u16).

@@ -2,9 +2,11 @@
 //! `chromium`, as `scripts/install-deps.sh` installs it) during a simulated
 //! measurement: the page's own state (`window.mfdConsole`) must show the
 //! preview and the progress moving, the canvas must hold the frame's pixels
-//! (not a blank page), the stop button must stop the run as Ctrl-C does,
-//! and a result picture must appear; a screenshot is written under the
-//! test's temporary folder (and copied to `$MFD_CONSOLE_SCREENSHOT` when set).
+//! (not a blank page), the stop button must stop the run as Ctrl-C does
+//! (the page sending its token), a result picture must appear, and the
+//! content security policy must block nothing of the page's own; a
+//! screenshot is written under the test's temporary folder (and copied to
+//! `$MFD_CONSOLE_SCREENSHOT` when set).
 
 use crate::console_support;
 
@@ -24,10 +26,10 @@ use mfd::console::{self, Console, Mode};
 use mfd::live::Start;
 use serde_json::Value;
 
-const CHROMIUM: &str = "/usr/bin/chromium";
+pub(crate) const CHROMIUM: &str = "/usr/bin/chromium";
 
 /// The page's state.
-async fn state(page: &Page) -> Value {
+pub(crate) async fn state(page: &Page) -> Value {
     page.evaluate("JSON.stringify(window.mfdConsole || null)")
         .await
         .unwrap()
@@ -37,7 +39,12 @@ async fn state(page: &Page) -> Value {
 }
 
 /// Polls the page's state until `ok` holds, or panics after `limit`.
-async fn until(page: &Page, limit: Duration, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
+pub(crate) async fn until(
+    page: &Page,
+    limit: Duration,
+    what: &str,
+    ok: impl Fn(&Value) -> bool,
+) -> Value {
     let t0 = Instant::now();
     loop {
         let s = state(page).await;
@@ -58,9 +65,12 @@ async fn lit_canvas_pixels(page: &Page) -> u64 {
     page.evaluate(js).await.unwrap().into_value().unwrap()
 }
 
-fn launch_config(profile: &Path) -> BrowserConfig {
+/// A headless browser with a fresh profile at `profile`, and `args`
+/// (`("name", "value")` as `--name=value`).
+pub(crate) fn launch_config(profile: &Path, args: &[(&str, &str)]) -> BrowserConfig {
     BrowserConfig::builder()
         .chrome_executable(CHROMIUM)
+        .args(args.iter().copied())
         .no_sandbox()
         .user_data_dir(profile)
         .window_size(1400, 1000)
@@ -193,7 +203,7 @@ async fn drive(url: &str, profile: &Path, shot: &Path, run: Run<'_>) -> (usize, 
         ended,
         page_ready,
     } = run;
-    let (mut browser, mut handler) = Browser::launch(launch_config(profile)).await.unwrap();
+    let (mut browser, mut handler) = Browser::launch(launch_config(profile, &[])).await.unwrap();
     let events = tokio::spawn(async move { while let Some(Ok(_)) = handler.next().await {} });
     let page = browser.new_page(url).await.unwrap();
     let limit = Duration::from_secs(60);
@@ -272,6 +282,8 @@ async fn drive(url: &str, profile: &Path, shot: &Path, run: Run<'_>) -> (usize, 
     })
     .await;
     assert!(s["previewNonBlank"].as_u64() > Some(0));
+    // The policy (default-src 'self') blocked nothing of the page's own.
+    assert_eq!(s["policyViolations"], serde_json::json!([]), "{s}");
     let lit = lit_canvas_pixels(&page).await;
     page.save_screenshot(ScreenshotParams::builder().build(), shot)
         .await

@@ -223,7 +223,7 @@ fn stop_does_what_ctrl_c_does_and_the_run_resumes() {
             // Stop once a few frames are in.
             let a = get(addr, "/api/preview?wait_ms=20000&after=4");
             assert_eq!(a.status, 200);
-            let a = request(addr, "POST", "/api/stop", &[]);
+            let a = console_support::page_stop(addr);
             assert_eq!(a.status, 202);
             assert!(a.json::<Status>().stop_requested);
         });
@@ -246,10 +246,7 @@ fn stop_does_what_ctrl_c_does_and_the_run_resumes() {
     assert_eq!(m.recorded(), n, "the stopped run resumes where it stopped");
     // A console with nothing to stop says so.
     let idle = console::serve(loopback(), Console::results_only()).unwrap();
-    assert_eq!(
-        request(idle.local_addr(), "POST", "/api/stop", &[]).status,
-        409
-    );
+    assert_eq!(console_support::page_stop(idle.local_addr()).status, 409);
     server.shutdown();
 }
 

@@ -1,16 +1,35 @@
 // The mfd console page. Everything it needs comes from the mfd process
 // that serves it. Its state is in window.mfdConsole (the browser test reads it).
+// Data (names, paths, messages) reaches the DOM only as text (textContent,
+// attributes set as properties), never as markup: a result file may be
+// named "<img src=x onerror=...>.png".
 "use strict";
 const S = (window.mfdConsole = {
   status: null, statusMessages: 0, previews: 0, lastPreview: null,
-  previewNonBlank: 0, results: [], resultsVersion: -1, errors: [],
+  previewNonBlank: 0, results: [], resultsVersion: -1, errors: [], policyViolations: [],
 });
+// A policy violation means something of the page's own is blocked: keep it
+// where the browser test reads it.
+document.addEventListener("securitypolicyviolation", (e) => {
+  S.policyViolations.push(`${e.violatedDirective}: ${e.blockedURI}`);
+});
+// Off loopback every request carries the token of the page's address.
 const token = new URLSearchParams(location.search).get("token");
+// The token of this process, which changes need in X-Mfd-Token: another
+// site's page can neither read it nor send that header.
+const pageToken = document.querySelector('meta[name="mfd-token"]').content;
 function api(path) {
   if (!token) return path;
   return path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token);
 }
 const $ = (id) => document.getElementById(id);
+// An element with its class and text (text only: never parsed as markup).
+function el(tag, className, text) {
+  const e = document.createElement(tag);
+  if (className) e.className = className;
+  if (text !== undefined) e.textContent = String(text);
+  return e;
+}
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 const fmt = (x, d) => (x === null || x === undefined ? "–" : Number(x).toFixed(d));
 
@@ -46,7 +65,11 @@ function showStatus(st) {
       ["mismatched frames", p.mismatches],
       ["lost frames", p.lost_frames],
     ];
-    $("progress").tBodies[0].innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
+    $("progress").tBodies[0].replaceChildren(...rows.map(([k, v]) => {
+      const tr = el("tr");
+      tr.append(el("td", null, k), el("td", null, v));
+      return tr;
+    }));
   }
   const sp = st.spectral;
   $("spectral").textContent = {
@@ -105,12 +128,14 @@ async function previewLoop() {
 }
 
 async function drawPreview(p) {
-  const img = new Image();
-  img.src = "data:image/png;base64," + p.png_base64;
-  await img.decode();
+  // Decoded from bytes, not loaded from a data: address, which the policy
+  // (default-src 'self') does not allow.
+  const bytes = Uint8Array.from(atob(p.png_base64), (ch) => ch.charCodeAt(0));
+  const img = await createImageBitmap(new Blob([bytes], { type: "image/png" }));
   const c = $("preview"), ctx = c.getContext("2d");
   c.width = p.width; c.height = p.height;
   ctx.drawImage(img, 0, 0);
+  img.close();
   const px = ctx.getImageData(0, 0, c.width, c.height).data;
   let lit = 0;
   for (let k = 0; k < px.length; k += 4) if (px[k] || px[k + 1] || px[k + 2]) lit++;
@@ -140,33 +165,57 @@ function drawHistogram(p) {
   ctx.fillText("counts (log scale of pixels)", c.width / 2 - 70, c.height - 1);
 }
 
+// A link to a result file (its address comes percent-encoded from mfd; one
+// that is not under /results/ is not shown).
+function fileLink(f, child) {
+  const a = el("a");
+  if (typeof f.url === "string" && f.url.startsWith("/results/")) a.href = api(f.url);
+  if (f.kind === "download") a.download = f.name;
+  a.append(child);
+  return a;
+}
+
+function resultDir(dir) {
+  const div = el("div", "result");
+  div.append(el("h3", null, dir.name), el("p", "note", dir.path));
+  if (!dir.files.length) div.append(el("p", "note", "no files yet"));
+  for (const f of dir.files.filter((f) => f.kind === "picture")) {
+    const fig = el("figure");
+    const img = el("img");
+    img.alt = f.name;
+    if (f.url.startsWith("/results/")) img.src = api(f.url);
+    fig.append(fileLink(f, img), el("figcaption", null, f.name));
+    div.append(fig);
+  }
+  const other = dir.files.filter((f) => f.kind !== "picture");
+  if (other.length) {
+    const p = el("p");
+    other.forEach((f, k) => {
+      if (k) p.append(" · ");
+      p.append(fileLink(f, f.name + (f.kind === "download" ? " ⤓" : "")));
+    });
+    div.append(p);
+  }
+  return div;
+}
+
 async function loadResults() {
   try {
     const r = await fetch(api("/api/results"), { cache: "no-store" });
     const list = await r.json();
     S.results = list;
-    const root = $("results");
-    root.innerHTML = "";
+    const divs = [];
     for (const dir of list) {
-      const div = document.createElement("div");
-      div.className = "result";
-      div.innerHTML = `<h3>${dir.name}</h3><p class="note">${dir.path}</p>`;
-      if (!dir.files.length) div.innerHTML += `<p class="note">no files yet</p>`;
-      for (const f of dir.files) {
-        if (f.kind === "picture") {
-          div.innerHTML += `<figure><a href="${api(f.url)}"><img src="${api(f.url)}" alt="${f.name}"></a><figcaption>${f.name}</figcaption></figure>`;
-        }
-      }
-      const data = dir.files.filter((f) => f.kind === "data");
-      if (data.length) div.innerHTML += "<p>" + data.map((f) => `<a href="${api(f.url)}">${f.name}</a>`).join(" · ") + "</p>";
+      const div = resultDir(dir);
       const summary = dir.files.find((f) => f.name === "summary.json");
       if (summary) {
-        const pre = document.createElement("pre");
-        pre.textContent = JSON.stringify(await (await fetch(api(summary.url))).json(), null, 1);
-        div.appendChild(pre);
+        const text = JSON.stringify(await (await fetch(api(summary.url))).json(), null, 1);
+        div.append(el("pre", null, text));
       }
-      root.appendChild(div);
+      divs.push(div);
     }
+    if (!divs.length) divs.push(el("p", "note", "none yet"));
+    $("results").replaceChildren(...divs);
   } catch (e) {
     S.errors.push(String(e));
   }
@@ -174,7 +223,7 @@ async function loadResults() {
 
 $("stop").onclick = async () => {
   $("stop").disabled = true;
-  await fetch(api("/api/stop"), { method: "POST" });
+  await fetch(api("/api/stop"), { method: "POST", headers: { "X-Mfd-Token": pageToken } });
 };
 
 connect();
