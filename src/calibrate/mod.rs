@@ -36,6 +36,7 @@ pub mod centroid;
 pub mod check;
 mod check_marks;
 pub mod dlt;
+mod duplicates;
 pub mod error;
 pub mod frame;
 pub mod from_session;
