@@ -17,6 +17,7 @@ mod report_support;
 
 mod acquisition_io;
 mod architecture;
+mod bad_inputs;
 mod bench_json;
 mod budget_cli;
 mod budget_fisher;
