@@ -55,6 +55,7 @@ pub mod session_file;
 pub mod simulate;
 mod spot_background;
 pub mod spread;
+pub mod target_grid;
 
 pub use rules::{station_size_mm, PLAUSIBLE_STAGE_STD_UM, UNIT_MARGIN};
 pub use session::{ObservedTarget, Session, SessionError, Target, TargetObservation};
