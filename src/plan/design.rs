@@ -223,7 +223,7 @@ pub fn budget_frames(budget: Budget, timing: &Timing) -> Result<Option<usize>, P
             "--time-s",
             t / timing.frame_s(),
             format!(
-                "{t} s, at least {:.0} frames at {} s per frame,",
+                "{t} s, at least {:.0} frames at {:.4} s per frame,",
                 t / timing.frame_s(),
                 timing.frame_s()
             ),
