@@ -231,7 +231,7 @@ pub fn budget_frames(budget: Budget, timing: &Timing) -> Result<Option<usize>, P
         Budget::TargetNm(_) => return Ok(None),
     };
     let need = Bytes((frames * BYTES_PER_FRAME as f64).min(u64::MAX as f64) as u64);
-    if !(frames <= MAX_FRAMES as f64) {
+    if frames.is_nan() || frames > MAX_FRAMES as f64 {
         let most = match budget {
             Budget::Seconds(_) => {
                 format!(" (at most {:.0} s)", MAX_FRAMES as f64 * timing.frame_s())
