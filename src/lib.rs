@@ -42,6 +42,7 @@ pub mod console;
 pub mod conventions;
 pub mod formats;
 pub mod kernels;
+pub mod limits;
 pub mod live;
 pub mod optics;
 pub mod outcome;

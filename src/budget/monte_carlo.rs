@@ -13,12 +13,53 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 
 use super::scene::{BudgetError, Scene, SceneOptions};
+use crate::limits::{check_fits, Bytes};
 use crate::optics::station::{Station, StationUncertainty};
 use crate::optics::trace::{Plate, TracedView};
 use crate::solve::surfaces::{reconstruct, Observations, Uncertainty};
 
 /// One draw's errors of the front and the back coefficients, nm.
 type DrawErrors = (Vec<f64>, Vec<f64>);
+
+/// The most draws a Monte Carlo check makes. The RMS of N draws is known
+/// to a relative 1σ of 1/√(2N): 0.2 % at 10⁵, finer than the three digits
+/// the table prints; each draw re-traces and reconstructs (milliseconds to
+/// seconds), so more would run for days and hold every draw's errors.
+pub const MAX_DRAWS: usize = 100_000;
+
+/// Memory one draw holds until the RMS is taken, bytes: its two rows of
+/// errors (`terms` coefficients of each surface, 8 B each) and their
+/// headers, kept for every draw ([`MonteCarlo::front_errors_nm`]).
+pub fn bytes_per_draw(terms: usize) -> u64 {
+    (std::mem::size_of::<Result<DrawErrors, BudgetError>>() + 2 * 8 * terms) as u64
+}
+
+/// Refuses `draws` above [`MAX_DRAWS`], or above what the machine can
+/// hold for `terms` coefficients per surface, before any is drawn.
+///
+/// # Errors
+/// [`BudgetError::Invalid`] naming `--monte-carlo`, the limit and the
+/// memory the draws would need.
+pub fn check_draws(draws: usize, terms: usize) -> Result<(), BudgetError> {
+    let invalid = |problem: String| BudgetError::Invalid {
+        input: "--monte-carlo".into(),
+        problem,
+    };
+    let each = bytes_per_draw(terms);
+    if draws == 0 || draws > MAX_DRAWS {
+        let need = Bytes((draws as u64).saturating_mul(each));
+        return Err(invalid(format!(
+            "{draws} draws: expected 1 to {MAX_DRAWS} (the RMS of {MAX_DRAWS} is known to 0.2 %); \
+             {draws} would need {need} of memory at {each} B per draw"
+        )));
+    }
+    check_fits(
+        &format!("{draws} draws at {each} B each"),
+        draws as u64,
+        each,
+    )
+    .map_err(|e| invalid(e.to_string()))
+}
 
 /// The Monte Carlo check's outcome.
 #[derive(Debug, Clone, PartialEq)]
@@ -112,6 +153,7 @@ pub fn monte_carlo(
     draws: usize,
     seed: u64,
 ) -> Result<MonteCarlo, BudgetError> {
+    check_draws(draws, opts.terms)?;
     let l = cholesky(&uncertainty.covariance);
     let base = &scene.solution;
     let (nf, nb) = (

@@ -98,20 +98,39 @@ fn invalid(input: impl Into<String>, problem: impl Into<String>) -> BudgetError 
 /// # Errors
 /// [`BudgetError`] naming the file and the field (`frame[k].tau`, ...).
 pub fn load_schedule(path: &Path) -> Result<Vec<FrameInfo>, BudgetError> {
-    use crate::acquire::schedule_file::{self, ScheduleFileError};
-    match schedule_file::load(path) {
-        Ok(file) => Ok(file.frames()),
-        Err(ScheduleFileError::Io { path, source }) => Err(BudgetError::Io { path, source }),
-        Err(ScheduleFileError::Parse { path, source }) => Err(BudgetError::Parse {
+    crate::acquire::schedule_file::load(path)
+        .map(|file| file.frames())
+        .map_err(schedule_error)
+}
+
+/// [`load_schedule`] for `station`: every τ one its screen can show, by
+/// the check `mfd simulate`, `measure` and `reconstruct` make
+/// ([`crate::acquire::schedule_file::ScheduleFile::check_against_screen`]).
+///
+/// # Errors
+/// As [`load_schedule`]; a τ beyond the screen's Nyquist limit names
+/// `frame[k].tau` and the limit.
+pub fn load_schedule_for(path: &Path, station: &Station) -> Result<Vec<FrameInfo>, BudgetError> {
+    let file = crate::acquire::schedule_file::load(path).map_err(schedule_error)?;
+    file.check_against_screen(path, station.screen.width, station.screen.height)
+        .map_err(schedule_error)?;
+    Ok(file.frames())
+}
+
+fn schedule_error(e: crate::acquire::schedule_file::ScheduleFileError) -> BudgetError {
+    use crate::acquire::schedule_file::ScheduleFileError;
+    match e {
+        ScheduleFileError::Io { path, source } => BudgetError::Io { path, source },
+        ScheduleFileError::Parse { path, source } => BudgetError::Parse {
             path,
             format: SCHEDULE_FORMAT,
             source,
-        }),
-        Err(ScheduleFileError::Invalid {
+        },
+        ScheduleFileError::Invalid {
             path,
             field,
             problem,
-        }) => Err(invalid(format!("{}: {field}", path.display()), problem)),
+        } => invalid(format!("{}: {field}", path.display()), problem),
     }
 }
 

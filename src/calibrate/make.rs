@@ -49,6 +49,17 @@ pub enum MakeError {
         /// The heights given.
         heights: Vec<f64>,
     },
+    /// A target grid finer than the sensor can tell apart, or larger than
+    /// memory holds.
+    #[error("--grid {nx},{ny}: {problem}")]
+    Grid {
+        /// Targets across.
+        nx: u32,
+        /// Targets down.
+        ny: u32,
+        /// What is wrong, with the limit.
+        problem: String,
+    },
 }
 
 impl crate::outcome::Classify for MakeError {
@@ -57,6 +68,7 @@ impl crate::outcome::Classify for MakeError {
         match self {
             MakeError::Io { source, .. } => crate::outcome::io_outcome(source),
             MakeError::Exists { .. } | MakeError::Heights { .. } => Some(Outcome::Input),
+            MakeError::Grid { .. } => Some(Outcome::Range),
             MakeError::Session(e) => e.outcome(),
             MakeError::Camera(e) => e.outcome(),
             MakeError::Image(e) => e.outcome(),
@@ -219,7 +231,9 @@ pub fn target_layout(level: usize, grid: (u32, u32), width: u32, height: u32) ->
 /// z). With `frame` the positions are stage readings.
 ///
 /// # Errors
-/// [`MakeError::Heights`] unless the heights hold two distinct values.
+/// [`MakeError::Heights`] unless the heights hold two distinct values;
+/// [`MakeError::Grid`] for a grid finer than
+/// [`max_targets_across`](super::target_grid::max_targets_across).
 pub fn plan_targets(
     station: &Station,
     frame: Option<&WorldFrame>,
@@ -233,6 +247,7 @@ pub fn plan_targets(
         });
     }
     let cam = &station.camera;
+    super::target_grid::check_grid(grid, heights_mm.len(), cam.width, cam.height)?;
     let mut out = Vec::new();
     for (level, &z) in heights_mm.iter().enumerate() {
         for px in target_layout(level, grid, cam.width, cam.height) {

@@ -37,6 +37,7 @@ pub mod check;
 mod check_layout;
 mod check_marks;
 pub mod dlt;
+mod duplicates;
 pub mod error;
 pub mod frame;
 pub mod from_session;
@@ -56,6 +57,7 @@ pub mod session_file;
 pub mod simulate;
 mod spot_background;
 pub mod spread;
+pub mod target_grid;
 mod valley;
 pub mod weak;
 

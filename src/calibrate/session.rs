@@ -378,17 +378,23 @@ pub(crate) fn folder_of(path: &Path) -> PathBuf {
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
 }
 
-/// Reads and parses `session.toml` without validating it.
+/// Reads and parses `session.toml`, refusing an entry that repeats
+/// another (`duplicates.rs`), without validating the rest.
 ///
 /// # Errors
-/// [`SessionError::Io`] or [`SessionError::Parse`].
+/// [`SessionError::Io`] or [`SessionError::Parse`]; [`SessionError::Invalid`]
+/// naming both entries of a repeat.
 pub fn read_file(path: &Path) -> Result<SessionFile, SessionError> {
     let text = std::fs::read_to_string(path).map_err(|source| SessionError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    toml::from_str(&text).map_err(|source| SessionError::Parse {
+    let file = toml::from_str(&text).map_err(|source| SessionError::Parse {
         path: path.to_path_buf(),
         source: Box::new(source),
-    })
+    })?;
+    match super::duplicates::first_duplicate(&file, path) {
+        Some(e) => Err(e),
+        None => Ok(file),
+    }
 }

@@ -96,6 +96,7 @@ fn parse_std(s: &str) -> Result<(String, f64), String> {
 
 /// Runs `mfd budget`.
 pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
+    check_options(args)?;
     let station = Station::load(&args.station)?;
     let file = match &args.uncertainty {
         Some(p) => {
@@ -111,8 +112,16 @@ pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
     let uncertainty = scene::merge_std(file, &args.stds, &name)?;
     let frames = match (&args.schedule, &args.acquisition) {
-        (Some(s), _) => scene::load_schedule(s)?,
-        (None, Some(a)) => Acquisition::open(a)?.frames().to_vec(),
+        (Some(s), _) => scene::load_schedule_for(s, &station).map_err(|e| {
+            // A schedule file that is not valid input, as `plan` says.
+            super::exit::classified(super::exit::Class::Input, e.into())
+        })?,
+        (None, Some(a)) => {
+            // τ beyond the screen: refused as `reconstruct` refuses it.
+            let acq = Acquisition::open(a)?;
+            mfd::acquire::acquisition::check_against_station(&acq, &station)?;
+            acq.frames().to_vec()
+        }
         (None, None) => anyhow::bail!("give --schedule FILE or --acquisition DIR"),
     };
     let opts = SceneOptions {
@@ -126,7 +135,6 @@ pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
         bound_stride_px: args.bound_stride,
         ..SceneOptions::default()
     };
-    check_options(args)?;
     let surfaces = scene::expected_surfaces(args.surfaces.as_deref(), &station)?;
     let start = std::time::Instant::now();
     let sc = scene::scene(&station, surfaces, &frames, &opts)?;
@@ -195,6 +203,11 @@ pub fn run(args: &BudgetArgs) -> anyhow::Result<()> {
 fn check_options(args: &BudgetArgs) -> anyhow::Result<()> {
     if args.monte_carlo == Some(0) {
         anyhow::bail!("--monte-carlo 0: expected at least 1 draw");
+    }
+    if let Some(n) = args.monte_carlo {
+        // Refused before the scene is traced: a number out of range.
+        monte_carlo::check_draws(n, args.terms)
+            .map_err(|e| super::exit::classified(super::exit::Class::Usage, e.into()))?;
     }
     if args.bound_stride == Some(0) {
         anyhow::bail!("--bound-stride 0: expected at least 1 pixel");

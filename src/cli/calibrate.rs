@@ -180,7 +180,14 @@ fn targets(args: &TargetsArgs) -> anyhow::Result<()> {
         frame.as_ref().map(|(f, _)| f),
         &args.heights,
         grid,
-    )?;
+    )
+    .map_err(|e| match e {
+        // A number out of range on the command line.
+        make::MakeError::Grid { .. } => {
+            super::exit::classified(super::exit::Class::Usage, e.into())
+        }
+        e => e.into(),
+    })?;
     let first = frame.as_ref().map_or(0, |(_, n)| *n);
     print!("{}", stanzas(&planned, first, frame.is_some()));
     Ok(())

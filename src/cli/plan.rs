@@ -131,6 +131,12 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
         (_, _, Some(x)) => Some(Budget::TargetNm(x)),
         _ => None,
     };
+    if let Some(b) = budget {
+        // A budget above the frames a schedule may have, or than memory
+        // holds: refused before anything is designed, as out of range.
+        plan::design::budget_frames(b, &opts.timing)
+            .map_err(|e| super::exit::classified(super::exit::Class::Usage, e.into()))?;
+    }
     let (prediction, extra) = match budget {
         Some(b) => {
             let dopts = DesignOptions {
@@ -166,14 +172,10 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             (d.prediction, Some(extra))
         }
         None => {
-            let frames = match &args.schedule {
-                Some(p) => schedule_file::load(p)?.frames(),
-                None => {
-                    let s = args.flags.schedule();
-                    s.validate()?;
-                    FrameInfo::from_patterns(&s.patterns())
-                }
-            };
+            // The schedule checked as `measure` and `simulate` check it:
+            // frame count, then τ against what the screen can show.
+            let patterns = args.flags.patterns(args.schedule.as_deref(), &station)?;
+            let frames = FrameInfo::from_patterns(&patterns);
             (plan::predict(&station, &frames, &opts)?, None)
         }
     };

@@ -24,6 +24,7 @@
 //! `header_size + ac_n_bytes`; values at or above 0x7FFFFFF8 mark pixels
 //! without data. A height is `value · W · S · O / R` metres.
 
+use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 use super::{CompareError, InterferometerMap};
@@ -197,18 +198,58 @@ pub fn header(path: &Path, bytes: &[u8]) -> Result<Header, CompareError> {
     })
 }
 
-/// Reads a MetroPro `.dat` file's phase map as heights.
+/// Reads a MetroPro `.dat` file's phase map as heights. The file must be
+/// a plain file of exactly the header's size, header, intensity and phase
+/// blocks; no more than that is read (a link to `/dev/zero` is refused
+/// before a byte of it is, a longer file by its length).
 ///
 /// # Errors
 /// [`CompareError`] naming the file and the field.
 pub fn read(path: &Path) -> Result<InterferometerMap, CompareError> {
-    let bytes = std::fs::read(path).map_err(|source| CompareError::Io {
+    let io = |source| CompareError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    if !meta.is_file() {
+        return Err(CompareError::Length {
+            path: path.to_path_buf(),
+            problem: "not a plain file (a device, a pipe or a folder): a MetroPro file has the \
+                      size its header gives"
+                .into(),
+        });
+    }
+    // The largest header a known format has, then the blocks it announces.
+    let largest_header = KNOWN_HEADERS.iter().map(|k| k.2 as u64).max().unwrap_or(0);
+    let mut reader = file.take(largest_header);
+    let mut bytes = Vec::new();
+    reader.read_to_end(&mut bytes).map_err(io)?;
     let h = header(path, &bytes)?;
     let start = h.header_size + h.ac_n_bytes;
     let n = h.cn_width * h.cn_height;
+    let total = (start + 4 * n) as u64;
+    if meta.len() > total {
+        return Err(CompareError::Length {
+            path: path.to_path_buf(),
+            problem: format!(
+                "{} bytes, where its header gives {total} (header {} + intensity {} + \
+                 phase 4 × {} × {}): not one MetroPro map",
+                meta.len(),
+                h.header_size,
+                h.ac_n_bytes,
+                h.cn_width,
+                h.cn_height
+            ),
+        });
+    }
+    let mut file = reader.into_inner();
+    bytes.truncate(h.header_size);
+    file.seek(SeekFrom::Start(h.header_size as u64))
+        .map_err(io)?;
+    file.take(total - h.header_size as u64)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
     if bytes.len() < start + 4 * n {
         return Err(CompareError::Truncated {
             path: path.to_path_buf(),

@@ -27,6 +27,16 @@ pub enum CompareError {
         /// What the format allows.
         expected: String,
     },
+    /// Not a plain file, or longer than its header says: read no further
+    /// than the header's size, so a link to a device or a file with
+    /// something appended is named, not read until memory runs out.
+    #[error("{path}: {problem}")]
+    Length {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with the sizes.
+        problem: String,
+    },
     /// The file ends before the data its header announces.
     #[error("{path}: {what} needs {expected} bytes from offset {offset}, the file has {found}")]
     Truncated {

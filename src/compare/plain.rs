@@ -39,10 +39,18 @@ pub fn read_npy(path: &Path, scale_nm: f64) -> Result<InterferometerMap, Compare
 /// [`CompareError::Csv`] naming the line of a field that is not a number or
 /// a row of another length.
 pub fn read_csv(path: &Path, scale_nm: f64) -> Result<InterferometerMap, CompareError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CompareError::Io {
+    let io = |source| CompareError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
+    };
+    // A link to a device would be read until memory runs out.
+    if !std::fs::metadata(path).map_err(io)?.is_file() {
+        return Err(CompareError::Length {
+            path: path.to_path_buf(),
+            problem: "not a plain file (a device, a pipe or a folder)".into(),
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
     let (mut width, mut rows, mut heights_nm) = (0, 0, Vec::new());
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();

@@ -89,6 +89,98 @@ pub fn read_gray(path: &Path) -> Result<GrayImage, ImageError> {
     }
 }
 
+/// What a frame file's header says: its size and bit depth, read without
+/// decoding the samples (an acquisition compares every frame's header with
+/// its first frame's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GrayHeader {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Bits per sample in the file (8 or 16).
+    pub bit_depth: u8,
+}
+
+impl GrayImage {
+    /// This frame's size and bit depth.
+    pub fn header(&self) -> GrayHeader {
+        GrayHeader {
+            width: self.width,
+            height: self.height,
+            bit_depth: self.bit_depth,
+        }
+    }
+}
+
+impl std::fmt::Display for GrayHeader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}x{} pixels at {} bits",
+            self.width, self.height, self.bit_depth
+        )
+    }
+}
+
+/// Reads only the header of an 8- or 16-bit grayscale PNG or TIFF.
+///
+/// # Errors
+/// As [`read_gray`], for what the header shows.
+pub fn read_gray_header(path: &Path) -> Result<GrayHeader, ImageError> {
+    if is_ext(path, &["png"]) {
+        let reader = png::Decoder::new(open(path)?)
+            .read_info()
+            .map_err(|e| decode_err(path, e))?;
+        let info = reader.info();
+        let bit_depth = png_gray_bits(path, info.color_type, info.bit_depth)?;
+        Ok(GrayHeader {
+            width: info.width,
+            height: info.height,
+            bit_depth,
+        })
+    } else if is_ext(path, &["tif", "tiff"]) {
+        let mut dec = tiff::decoder::Decoder::new(open(path)?).map_err(|e| decode_err(path, e))?;
+        let (width, height) = dec.dimensions().map_err(|e| decode_err(path, e))?;
+        let bit_depth = match dec.colortype().map_err(|e| decode_err(path, e))? {
+            tiff::ColorType::Gray(8) => 8,
+            tiff::ColorType::Gray(16) => 16,
+            other => {
+                return Err(ImageError::NotGray {
+                    path: path.to_path_buf(),
+                    found: format!("{other:?}"),
+                })
+            }
+        };
+        Ok(GrayHeader {
+            width,
+            height,
+            bit_depth,
+        })
+    } else {
+        Err(ImageError::UnknownType {
+            path: path.to_path_buf(),
+        })
+    }
+}
+
+/// The bits per sample of a grayscale PNG; any other colour type or depth
+/// is refused by name.
+fn png_gray_bits(
+    path: &Path,
+    color: png::ColorType,
+    depth: png::BitDepth,
+) -> Result<u8, ImageError> {
+    match (color, depth) {
+        (png::ColorType::Grayscale, png::BitDepth::Eight) => Ok(8),
+        (png::ColorType::Grayscale, png::BitDepth::Sixteen) => Ok(16),
+        _ => Err(ImageError::NotGray {
+            path: path.to_path_buf(),
+            found: format!("{color:?} at {depth:?} bits"),
+        }),
+    }
+}
+
 /// The largest frame a reader decodes, bytes: the largest sensor a station
 /// may have (2^26 pixels, `optics::station`'s validation) at 16 bits. The
 /// decoders refuse a header announcing more before allocating it (PNG's
@@ -113,16 +205,7 @@ fn read_png(path: &Path) -> Result<GrayImage, ImageError> {
         .map_err(|e| decode_err(path, e))?;
     let info = reader.info();
     let (color, depth) = (info.color_type, info.bit_depth);
-    let bits = match (color, depth) {
-        (png::ColorType::Grayscale, png::BitDepth::Eight) => 8,
-        (png::ColorType::Grayscale, png::BitDepth::Sixteen) => 16,
-        _ => {
-            return Err(ImageError::NotGray {
-                path: path.to_path_buf(),
-                found: format!("{color:?} at {depth:?} bits"),
-            })
-        }
-    };
+    let bits = png_gray_bits(path, color, depth)?;
     // The decoder's limits bound what it buffers, not the frame it asks
     // for: the header's size is checked here, before the frame is allocated.
     let (width, height) = (reader.info().width, reader.info().height);

@@ -17,6 +17,9 @@ use crate::solve::spectral::periodogram::SpectrumPlans;
 
 use super::{PlanError, PlanOptions};
 
+mod scan;
+use scan::Scan;
+
 /// Height of a false maximum of the ambiguity function, relative to the
 /// true one, at which a start may pick it: half (with the noise a bound
 /// allows on a measured pixel, a secondary peak at half the power of the
@@ -70,16 +73,18 @@ pub fn ambiguity_at(taus: &[f64], kappa: f64, delta: f64) -> f64 {
 
 /// The main lobe and unambiguous range of one direction, scanned over the
 /// whole screen (Δ up to 1.05 in fringe coordinate) at 1/32 of the
-/// finest fringe period.
+/// finest fringe period ([`ambiguity_at`]'s values, by the linear-time
+/// [`scan`]).
 pub fn direction_ambiguity(taus: &[f64], kappa: f64, axis: &FringeAxis) -> (f64, Option<f64>) {
     let tau_hi = taus.iter().copied().fold(1.0, f64::max);
     let step = 1.0 / (32.0 * tau_hi);
     let n = (1.05 / step).ceil() as usize;
     let mut lobe = None;
     let mut range = None;
+    let mut scan = Scan::new(taus, kappa, step);
     for k in 1..=n {
         let d = k as f64 * step;
-        let a = ambiguity_at(taus, kappa, d);
+        let a = scan.next_value();
         match lobe {
             None if a < SIDELOBE_MAX => lobe = Some(d),
             Some(_) if a >= SIDELOBE_MAX => {

@@ -26,6 +26,8 @@ const FLOORS: &[(&str, u32)] = &[
     ("outcome", 0),
     // Floor 1: the exact optics (station, Zernike surfaces, the tracer).
     ("optics", 1),
+    // Also floor 1: sizes refused before they are allocated (uses `outcome`).
+    ("limits", 1),
     // Floor 2: file formats of the optics' results.
     ("formats", 2),
     // Floor 3: patterns, schedules, frames, acquisitions, cameras, display.

@@ -17,6 +17,8 @@ mod report_support;
 
 mod acquisition_io;
 mod architecture;
+mod bad_inputs;
+mod bad_sizes;
 mod bench_json;
 mod budget_cli;
 mod budget_fisher;

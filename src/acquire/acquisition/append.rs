@@ -7,6 +7,7 @@ use std::path::Path;
 use super::manifest::{self, ManifestFile, ACQUISITION_FORMAT};
 use super::writer::{frame_file, io, prepare_dir, replace, AcquisitionWriter, Mode, Prepare};
 use super::{AcquisitionError, FrameInfo, MANIFEST};
+use crate::formats::image_io;
 
 impl AcquisitionWriter {
     /// Append mode: starts a new acquisition in `dir` for the schedule
@@ -88,7 +89,18 @@ impl AcquisitionWriter {
                 ));
             }
         }
-        Self::open_append(dir, schedule, file.frames.len())
+        let mut writer = Self::open_append(dir, schedule, file.frames.len())?;
+        if !file.frames.is_empty() {
+            // The frames still to come must match those on disk: frame 0's
+            // header fixes the size and bit depth (the reader holds the
+            // recorded ones to it).
+            let first = dir.join(frame_file(0));
+            let header = image_io::read_gray_header(&first)
+                .map_err(|source| AcquisitionError::Image { frame: 0, source })?;
+            writer.resolution = Some((header.width, header.height));
+            writer.stored_bits = Some(header.bit_depth);
+        }
+        Ok(writer)
     }
 
     fn open_append(
@@ -106,6 +118,7 @@ impl AcquisitionWriter {
             mode: Mode::Append { manifest },
             frames: schedule.to_vec(),
             resolution: None,
+            stored_bits: None,
             next,
         })
     }

@@ -6,17 +6,19 @@
 mod append;
 mod manifest;
 mod range;
+mod same;
 mod writer;
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Mutex, OnceLock};
 
 pub use manifest::{FrameEntry, ManifestFile, ACQUISITION_FORMAT};
 pub use range::check_against_station;
+pub use same::file_identity;
 pub use writer::{AcquisitionWriter, FrameImage, FrameLayout};
 
 use crate::acquire::patterns::MAX_FRAMES;
-use crate::formats::image_io::{self, ImageError};
+use crate::formats::image_io::{self, GrayHeader, ImageError};
 use crate::formats::npy::{NpyError, NpyStackReader};
 
 /// File name of the manifest inside an acquisition folder.
@@ -149,6 +151,8 @@ pub struct Acquisition {
     frames: Vec<FrameInfo>,
     source: Source,
     resolution: Option<(u32, u32)>,
+    /// Frame 0's size and bit depth, once a frame file was read.
+    first: OnceLock<GrayHeader>,
 }
 
 impl Acquisition {
@@ -209,12 +213,15 @@ impl Acquisition {
             .to_path_buf();
         let mut frames = Vec::with_capacity(file.frames.len());
         let mut files = Vec::new();
+        let mut names = Vec::new();
         for (index, f) in file.frames.iter().enumerate() {
             let (info, name) = frame_entry(index, f, file.stack.is_some())
                 .map_err(|(field, problem)| invalid(field, problem))?;
             files.extend(name.map(|n| dir.join(n)));
+            names.extend(name);
             frames.push(info);
         }
+        same::check_distinct(&manifest_path, &files, &names)?;
         let source = match &file.stack {
             Some(name) => {
                 let reader = NpyStackReader::open(&dir.join(name))?;
@@ -238,6 +245,7 @@ impl Acquisition {
             frames,
             source,
             resolution: None,
+            first: OnceLock::new(),
         })
     }
 
@@ -308,6 +316,7 @@ impl Acquisition {
                     frame: index,
                     source,
                 })?;
+                same::check_like_first(&self.first, files, index, img.header())?;
                 if let Some((w, h)) = self.resolution.filter(|&r| r != (img.width, img.height)) {
                     return Err(AcquisitionError::Frame {
                         frame: index,

@@ -76,6 +76,10 @@ pub struct AcquisitionWriter {
     /// Frame size `(width, height)`: given for a whole acquisition, set by
     /// the first frame written when appending.
     pub(super) resolution: Option<(u32, u32)>,
+    /// When appending: the bits per sample of the frames already on disk
+    /// (8 or 16), set by the first one; a resumed recording must go on at
+    /// that depth, or its frames would mix two scales.
+    pub(super) stored_bits: Option<u8>,
     pub(super) next: usize,
 }
 
@@ -196,6 +200,7 @@ impl AcquisitionWriter {
             mode,
             frames: frames.to_vec(),
             resolution: Some((width, height)),
+            stored_bits: None,
             next: 0,
         })
     }
@@ -227,7 +232,7 @@ impl AcquisitionWriter {
             Mode::Stack(w) => w.append(frame.data)?,
             Mode::Png { bit_depth } => write_png(&self.dir, index, *bit_depth, frame)?,
             Mode::Append { manifest } => {
-                let depth = if frame.bit_depth <= 8 { 8 } else { 16 };
+                let depth = stored_depth(frame.bit_depth);
                 write_png(&self.dir, index, depth, frame)?;
                 let path = self.dir.join(MANIFEST);
                 let text = manifest::frame_text(&entry(&self.frames[index], true), &path)?;
@@ -235,6 +240,9 @@ impl AcquisitionWriter {
             }
         }
         self.resolution = Some((frame.width, frame.height));
+        if let Mode::Append { .. } = self.mode {
+            self.stored_bits = Some(stored_depth(frame.bit_depth));
+        }
         self.next += 1;
         Ok(())
     }
@@ -257,6 +265,14 @@ impl AcquisitionWriter {
             return Err(bad(format!(
                 "{}x{} pixels, expected {w}x{h}",
                 frame.width, frame.height
+            )));
+        }
+        let depth = stored_depth(frame.bit_depth);
+        if let Some(held) = self.stored_bits.filter(|&b| b != depth) {
+            return Err(bad(format!(
+                "{depth}-bit, but the frames recorded before it (from {}) are {held}-bit: \
+                 a recording keeps one bit depth",
+                frame_file(0)
             )));
         }
         let expected = w as usize * h as usize;
@@ -311,6 +327,15 @@ impl AcquisitionWriter {
             Mode::Png { .. } | Mode::Append { .. } => {}
         }
         Ok(())
+    }
+}
+
+/// The PNG depth the append mode stores `bit_depth` significant bits at.
+pub(super) fn stored_depth(bit_depth: u8) -> u8 {
+    if bit_depth <= 8 {
+        8
+    } else {
+        16
     }
 }
 
