@@ -63,6 +63,9 @@ pub struct Fit {
     pub flat_max_sigma: f64,
     /// The joint step's trials.
     pub trials: usize,
+    /// The data's χ² at the truth less at the estimate, and halfway along
+    /// the straight line between them ([`super::curve`]).
+    pub rise: [f64; 2],
     /// Each parameter's `(error / σ)`, for a failure's report.
     pub each: Vec<(String, f64)>,
 }
@@ -96,20 +99,20 @@ pub fn judge(s: &Session) -> Judged {
         Ok(cal) => {
             let fit = fit(s, &cal);
             let mut problems = Vec::new();
-            if !(fit.p >= MIN_P) {
+            if fit.p.is_nan() || fit.p < MIN_P {
                 problems.push(format!(
                     "χ² {:.1} for k = {} (p = {:.2e} < {MIN_P})",
                     fit.chi2, fit.k, fit.p
                 ));
             }
             let p_data = chi2_sf(fit.chi2_data, fit.k_data);
-            if !(p_data >= MIN_P) {
+            if p_data.is_nan() || p_data < MIN_P {
                 problems.push(format!(
                     "χ² over the data's directions {:.1} for k = {} (p = {p_data:.2e} < {MIN_P})",
                     fit.chi2_data, fit.k_data
                 ));
             }
-            if !(fit.flat_max_sigma <= FLAT_MAX_SIGMA) {
+            if fit.flat_max_sigma.is_nan() || fit.flat_max_sigma > FLAT_MAX_SIGMA {
                 problems.push(format!(
                     "a flat point {:.1} σ off the truth (largest error {:.4} px)",
                     fit.flat_max_sigma, fit.flat_max_px
@@ -191,6 +194,7 @@ fn fit(s: &Session, cal: &Calibration) -> Fit {
         flat_max_px,
         flat_max_sigma,
         trials: cal.report.steps.last().map_or(0, |st| st.trials),
+        rise: super::curve::rise(s, cal),
         each,
     }
 }
