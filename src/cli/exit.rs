@@ -151,6 +151,7 @@ fn library_class(e: &(dyn std::error::Error + 'static)) -> Option<Class> {
         mfd::formats::npy::NpyError,
         mfd::formats::surfaces_file::SurfacesFileError,
         mfd::formats::surfaces_file::SurfacesOrFlatError,
+        mfd::limits::TooLarge,
         mfd::live::LiveError,
         mfd::live::MeasurementError,
         mfd::optics::station::StationError,

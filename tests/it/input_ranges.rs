@@ -111,8 +111,14 @@ fn sensor_and_screen_sizes_are_bounded() {
         err.contains("screen.resolution") && err.contains("16384"),
         "{err}"
     );
-    // The largest sensor accepted: 8192 × 8192 = 2^26 pixels.
-    let text = station_text_with("resolution = [48, 48]", "resolution = [8192, 8192]");
+    // The largest sensor accepted: 8192 × 8192 = 2^26 pixels (behind a
+    // 60 mm lens: the fixture's 6 mm would see 84° to the corner, beyond
+    // the 80° half field a station's camera may have).
+    let text = station_text_with("resolution = [48, 48]", "resolution = [8192, 8192]").replacen(
+        "focal_length_mm = 6.0",
+        "focal_length_mm = 60.0",
+        1,
+    );
     assert!(Station::from_toml_str(&text, path).is_ok());
 }
 

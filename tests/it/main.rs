@@ -33,6 +33,7 @@ mod calibrate_display_response;
 mod calibrate_pictures;
 mod calibrate_screen_points;
 mod calibrate_session;
+mod calibrate_soak;
 mod calibrate_weak;
 mod cli;
 mod cli_ranges;

@@ -46,9 +46,15 @@ pub(super) fn finish(
     rec.inputs = Some(inputs(args, &input.sha256));
     super::super::output::write_and_print(&rec, &result, &args.checks)?;
     // The acquisition holds a copy of the station: the calibration is
-    // where --station came from.
+    // where --station came from, if a calibration wrote it there (its
+    // report.json); a station written by hand has none, and the report
+    // refuses a --calibration folder that is not one.
     let options = mfd::report::page::ReportOptions {
-        calibration: args.station.parent().map(std::path::Path::to_path_buf),
+        calibration: args
+            .station
+            .parent()
+            .filter(|dir| dir.join("report.json").is_file())
+            .map(std::path::Path::to_path_buf),
         ..Default::default()
     };
     let report = mfd::report::page::write(&result, None, &options)?;
