@@ -126,7 +126,7 @@ mod tests {
         let e = fits("--frames 5", 32_000_000_000, 1_000_000_000, "test").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "--frames 5: would need 32.0 GB of memory, above the 1.0 GB free (test)"
+            "--frames 5: would need 32.0 GB of memory, above the 1000.0 MB free (test)"
         );
         // The machine this runs on has some memory free, and not 2^64 bytes.
         let (free, _) = available_bytes();

@@ -226,8 +226,13 @@ pub fn minimise<L: LeastSquares>(
     let mut lambda = damping.start;
     let mut trials = 0;
     let mut last_step = None;
-    // The cost after each trial (accepted or not: the current one).
-    let mut history = vec![cur.cost()];
+    // The cost after each trial (accepted or not: the current one), kept
+    // only for a stall test: the spectral stage runs this loop per pixel,
+    // and a Vec::new() costs it no allocation.
+    let mut history = Vec::new();
+    if damping.stall.is_some() {
+        history.push(cur.cost());
+    }
     let stop = loop {
         if let Some(st) = damping.stall {
             if history.len() > st.window {
@@ -270,7 +275,9 @@ pub fn minimise<L: LeastSquares>(
             cur = trial;
             lambda = (lambda / damping.down).max(damping.floor);
             last_step = Some(step);
-            history.push(cur.cost());
+            if damping.stall.is_some() {
+                history.push(cur.cost());
+            }
             if small_step {
                 break Stop::SmallStep;
             }
@@ -279,7 +286,9 @@ pub fn minimise<L: LeastSquares>(
             }
         } else {
             last_step = Some(step);
-            history.push(cur.cost());
+            if damping.stall.is_some() {
+                history.push(cur.cost());
+            }
             lambda *= damping.up;
             if lambda > damping.cap {
                 break Stop::Floor;
