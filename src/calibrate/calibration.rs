@@ -151,7 +151,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         "joint",
     )?;
     let steps = vec![
-        StepReport::new("resection", input, &camera, resection_blocks()),
+        StepReport::new("resection", input, &camera, Blocks::TARGETS),
         StepReport::new("screen", input, &screen, screen_blocks),
         StepReport::new("joint", input, &joint, Blocks::ALL),
     ];
@@ -174,16 +174,6 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         ],
         report,
     })
-}
-
-fn resection_blocks() -> Blocks {
-    Blocks {
-        flat_points: false,
-        element_points: false,
-        targets: true,
-        flat_map: false,
-        screen_points: false,
-    }
 }
 
 fn dofs_of(prefix: &str) -> Vec<Param> {

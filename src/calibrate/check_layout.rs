@@ -83,13 +83,7 @@ pub(super) fn layout_findings(session: &Session, sigma_px: f64, report: &mut Che
         station: session.nominal.clone(),
     };
     let params = camera_params();
-    let blocks = Blocks {
-        flat_points: false,
-        element_points: false,
-        targets: true,
-        flat_map: false,
-        screen_points: false,
-    };
+    let blocks = Blocks::TARGETS;
     let Ok(n) = information(&input, &state, &params, blocks) else {
         return;
     };

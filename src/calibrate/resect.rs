@@ -131,13 +131,7 @@ pub fn resect(input: &CalibrationInput, state: &State) -> Result<Adjusted, Calib
             problem: "lie in one plane: place targets at two or more heights".into(),
         });
     }
-    let blocks = Blocks {
-        flat_points: false,
-        element_points: false,
-        targets: true,
-        flat_map: false,
-        screen_points: false,
-    };
+    let blocks = Blocks::TARGETS;
     let mut start = state.clone();
     if let Some(cam) = linear_start(input, state) {
         let dlt_state = State {

@@ -44,6 +44,14 @@ impl Blocks {
         flat_map: true,
         screen_points: true,
     };
+    /// The targets alone: what the camera's resection fits.
+    pub const TARGETS: Blocks = Blocks {
+        flat_points: false,
+        element_points: false,
+        targets: true,
+        flat_map: false,
+        screen_points: false,
+    };
 }
 
 /// The whitening matrices of the two-dimensional residuals, fixed for one
