@@ -86,6 +86,9 @@ pub struct Options {
     /// The checks of the spectral stage's points against the noise and
     /// the station ([`consistency`]).
     pub limits: Limits,
+    /// The wavelength of the transmitted wavefront's figures in waves, nm;
+    /// `None`: [`crate::report::figures::DEFAULT_WAVELENGTH_NM`].
+    pub wavelength_nm: Option<f64>,
 }
 
 /// The spectral stage's result.
@@ -271,6 +274,15 @@ fn surface_stage(
     );
     let withheld = withheld(&summary, direct.as_ref(), options.max_expected_nm);
     summary.withheld = withheld.clone();
+    summary.figures = crate::report::figures::joint::of_solution(
+        &solution,
+        budget.as_ref(),
+        station,
+        options
+            .wavelength_nm
+            .unwrap_or(crate::report::figures::DEFAULT_WAVELENGTH_NM),
+        &withheld,
+    );
     Ok(SurfaceStage {
         solution,
         summary,

@@ -104,6 +104,42 @@ fn compare_surfaces(ours: &Path, truth: &Path, summary: Option<&Path>) -> anyhow
         }
         println!();
     }
+    if let Some(r) = &reported {
+        print_figures(r, &b)?;
+    }
+    Ok(())
+}
+
+/// The summary's figures (when it has them) beside those of the true
+/// surfaces, each difference in units of its σ.
+fn print_figures(summary: &serde_json::Value, truth: &SurfacesFile) -> anyhow::Result<()> {
+    use mfd::report::figures::{of_truth, table, Figures};
+    let Some(f) = summary.get("figures").filter(|f| !f.is_null()) else {
+        println!("figures: the summary has none (written before them)");
+        return Ok(());
+    };
+    let f: Figures = serde_json::from_value(f.clone())
+        .map_err(|e| super::exit::input(anyhow::anyhow!("summary figures: {e}")))?;
+    for line in table::lines(&f) {
+        println!("{line}");
+    }
+    let (Some(tf), Some(tb)) = (truth.front_coefficients(), truth.back_coefficients()) else {
+        return Ok(());
+    };
+    let n = f.plate.as_ref().map_or(1.5, |p| p.refractive_index);
+    let wl = f.plate.as_ref().map_or(mfd::report::figures::DEFAULT_WAVELENGTH_NM, |p| p.wavelength_nm);
+    let t = of_truth(tf, tb, truth.zernike.radius_mm, n, wl)?;
+    let scores = table::scores(&f, &t);
+    println!("figures against the truth (z = (value - truth) / sigma):");
+    for s in &scores {
+        println!("  {:<40} {:>12.4} truth {:>12.4} sigma {:>10.4} z {:>6.2}", s.key, s.value, s.truth, s.std, s.z);
+    }
+    let zs: Vec<f64> = scores.iter().map(|s| s.z).filter(|z| z.is_finite()).collect();
+    if !zs.is_empty() {
+        let rms = (zs.iter().map(|z| z * z).sum::<f64>() / zs.len() as f64).sqrt();
+        let worst = zs.iter().fold(0.0f64, |m, z| m.max(z.abs()));
+        println!("  {} figures: RMS z {rms:.2}, largest |z| {worst:.2}", zs.len());
+    }
     Ok(())
 }
 

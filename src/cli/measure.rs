@@ -16,6 +16,7 @@ use mfd::optics::station::{Dof, Station};
 
 mod devices;
 mod finish;
+mod repeat;
 mod session;
 
 #[cfg(feature = "display")]
@@ -104,6 +105,14 @@ pub struct MeasureArgs {
     /// Record only; skip the reconstruction.
     #[arg(long)]
     no_reconstruct: bool,
+    /// Measure N times in a row, each into --out/run-K (acquisition and
+    /// result), then write --out/repeatability.json: per figure and per
+    /// coefficient the spread over the runs against the reported σ.
+    #[arg(long, value_name = "N", value_parser = super::check::positive_int::<usize>, default_value_t = 1, conflicts_with_all = ["resume", "no_reconstruct", "serve"])]
+    repeat: usize,
+    /// Which run of --repeat this is (the simulated camera's noise seed).
+    #[arg(skip)]
+    run_index: u64,
     #[command(flatten)]
     spectral: super::SpectralArgs,
     #[command(flatten)]
@@ -147,6 +156,9 @@ struct FaultArgs {
 /// fullscreen window's event loop, which must own the main thread, with the
 /// measurement on the window's worker thread; else on the offscreen display.
 pub fn run(args: &MeasureArgs) -> anyhow::Result<()> {
+    if args.repeat > 1 {
+        return repeat::run_repeated(args, &StationInput::load(&args.station)?);
+    }
     #[cfg(feature = "display")]
     if args.display != "offscreen" {
         return on_monitor(args, StationInput::load(&args.station)?);

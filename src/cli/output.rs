@@ -193,6 +193,11 @@ fn print_surfaces(stage: &SurfaceStage) {
     if summary.station.is_none() {
         println!("  {}", summary.uncertainty_note);
     }
+    if let Some(f) = &summary.figures {
+        for line in mfd::report::figures::table::lines(f) {
+            println!("{line}");
+        }
+    }
     for r in &summary.refined {
         println!(
             "refined {}: {:+.6} from the station file, σ {:.3e} (prior {:.3e})",

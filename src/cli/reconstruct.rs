@@ -132,6 +132,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         estimator,
         max_expected_nm,
         limits: args.checks.limits(),
+        wavelength_nm: args.surfaces.wavelength_nm,
     };
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
@@ -180,6 +181,7 @@ fn from_screen_coords(
         surfaces,
         station_uncertainty,
         refine: args.refine.clone(),
+        wavelength_nm: args.surfaces.wavelength_nm,
         ..Options::default()
     };
     let mut rec = pipeline::reconstruct(

@@ -36,6 +36,10 @@ pub struct SurfaceArgs {
     /// expected error is as large as the fitted surface.
     #[arg(long, value_parser = super::check::positive)]
     pub max_expected_nm: Option<f64>,
+    /// Wavelength of the transmitted wavefront's figure in waves
+    /// (`summary.json`'s figures.plate.twe_rms_waves), nm; default 1053.
+    #[arg(long, value_parser = super::check::positive)]
+    pub wavelength_nm: Option<f64>,
 }
 
 impl SurfaceArgs {

@@ -3,8 +3,10 @@
 //! merit against a truth that every comparison quotes ([`metrics`]), and
 //! the operator's report page ([`page`]).
 
+pub mod figures;
 pub mod metrics;
 pub mod page;
 pub mod pictures;
+pub mod repeatability;
 pub mod records;
 pub mod summary;

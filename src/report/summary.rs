@@ -89,6 +89,10 @@ pub struct Summary {
     /// The spectral stage's points checked against the station.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub consistency: Option<crate::report::records::Consistency>,
+    /// The figures an optician reads, per face and of the plate, each with
+    /// its σ (`report::figures`); absent in summaries written before them.
+    #[serde(default)]
+    pub figures: Option<crate::report::figures::Figures>,
 }
 
 fn per_pixel() -> String {
@@ -290,6 +294,7 @@ impl Summary {
             withheld: [None, None],
             inputs: None,
             consistency: None,
+            figures: None,
         }
     }
 

@@ -46,6 +46,7 @@ mod console_security;
 mod direct_thin;
 mod exit_statuses;
 mod flat_plate;
+mod figures;
 mod fuzz_readers;
 mod input_ranges;
 mod measure_cli;

@@ -146,6 +146,8 @@ fn simulated_camera(
     let params = SimParams {
         bit_depth: args.bit_depth,
         noise_frac: args.noise,
+        // Each run of --repeat sees noise of its own.
+        seed: SimParams::default().seed.wrapping_add(args.run_index),
         ..SimParams::default()
     };
     let f = &args.faults;

@@ -108,6 +108,7 @@ fn options(args: &MeasureArgs, station: &Station) -> anyhow::Result<Options> {
         estimator,
         max_expected_nm,
         limits: args.checks.limits(),
+        wavelength_nm: args.surfaces.wavelength_nm,
         ..Options::default()
     };
     Ok(options)

@@ -12,6 +12,7 @@
 mod context;
 pub mod html;
 mod quality;
+pub mod result_block;
 mod sections;
 
 use std::path::{Path, PathBuf};
@@ -141,6 +142,10 @@ pub fn build(result: &Path, options: &ReportOptions) -> Result<String, ReportErr
         .iter()
         .find_map(|f| modified_s(&result.join(f)));
     let mut page = Page::new("Measurement report");
+    let scratch = Scratch::new()?;
+    if let Some(s) = &summary {
+        result_block::result_block(&mut page, result, s, &scratch.0)?;
+    }
     context.section(&mut page, result, written);
     let flags = quality::flag_counts(result)?;
     sections::warnings(&mut page, summary.as_ref(), flags.as_ref());
@@ -155,7 +160,6 @@ pub fn build(result: &Path, options: &ReportOptions) -> Result<String, ReportErr
     if let Some(c) = options.comparison {
         sections::comparison(&mut page, c)?;
     }
-    let scratch = Scratch::new()?;
     sections::spectral(
         &mut page,
         flags.as_ref(),

@@ -1,0 +1,52 @@
+//! `mfd measure --repeat 6` on the simulated camera: the spread of each
+//! surface over the runs against the error each run reported.
+
+use crate::common;
+
+/// Six measurements of the fixture's true surfaces (60 patterns, 0.1 %
+/// noise, 36 terms fixed so that every run fits the same model): each
+/// surface's spread over the runs over its reported expected error is in
+/// 0.5–2 (the criterion: with 6 runs the RMS departure of ~33
+/// coefficients is known to about 1/√(2·5·33) ≈ 5 %, so a right σ lands
+/// near 1 and a σ wrong by 2× outside).
+#[test]
+fn six_repeated_measurements_spread_as_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let station = common::public_small().join("station.toml");
+    let truth = common::public_small().join("truth/truth_surfaces.json");
+    let out = dir.path().display().to_string();
+    let log = common::mfd_ok(&[
+        "measure",
+        "--station",
+        station.to_str().unwrap(),
+        "--sim-surfaces",
+        truth.to_str().unwrap(),
+        "--out",
+        &out,
+        "--tau-start",
+        "1",
+        "--tau-stop",
+        "30",
+        "--tau-step",
+        "1",
+        "--noise",
+        "0.001",
+        "--terms",
+        "36",
+        "--repeat",
+        "6",
+    ]);
+    assert!(log.contains("run 6 of 6"), "{log}");
+    let text = std::fs::read_to_string(dir.path().join("repeatability.json")).unwrap();
+    let r: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(r["runs"], 6);
+    for name in ["front", "back"] {
+        let ratio = r[name]["spread_over_reported"].as_f64().unwrap();
+        println!("{name}: spread over reported {ratio:.3}");
+        assert!((0.5..=2.0).contains(&ratio), "{name}: {ratio}\n{log}");
+    }
+    assert!(r["figures"]["plate.wedge_arcsec"]["ratio"].as_f64().is_some(), "{text}");
+    for k in 1..=6 {
+        assert!(dir.path().join(format!("run-{k}/result/summary.json")).is_file());
+    }
+}
