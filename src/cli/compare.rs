@@ -127,18 +127,33 @@ fn print_figures(summary: &serde_json::Value, truth: &SurfacesFile) -> anyhow::R
         return Ok(());
     };
     let n = f.plate.as_ref().map_or(1.5, |p| p.refractive_index);
-    let wl = f.plate.as_ref().map_or(mfd::report::figures::DEFAULT_WAVELENGTH_NM, |p| p.wavelength_nm);
+    let wl = f
+        .plate
+        .as_ref()
+        .map_or(mfd::report::figures::DEFAULT_WAVELENGTH_NM, |p| {
+            p.wavelength_nm
+        });
     let t = of_truth(tf, tb, truth.zernike.radius_mm, n, wl)?;
     let scores = table::scores(&f, &t);
     println!("figures against the truth (z = (value - truth) / sigma):");
     for s in &scores {
-        println!("  {:<40} {:>12.4} truth {:>12.4} sigma {:>10.4} z {:>6.2}", s.key, s.value, s.truth, s.std, s.z);
+        println!(
+            "  {:<40} {:>12.4} truth {:>12.4} sigma {:>10.4} z {:>6.2}",
+            s.key, s.value, s.truth, s.std, s.z
+        );
     }
-    let zs: Vec<f64> = scores.iter().map(|s| s.z).filter(|z| z.is_finite()).collect();
+    let zs: Vec<f64> = scores
+        .iter()
+        .map(|s| s.z)
+        .filter(|z| z.is_finite())
+        .collect();
     if !zs.is_empty() {
         let rms = (zs.iter().map(|z| z * z).sum::<f64>() / zs.len() as f64).sqrt();
         let worst = zs.iter().fold(0.0f64, |m, z| m.max(z.abs()));
-        println!("  {} figures: RMS z {rms:.2}, largest |z| {worst:.2}", zs.len());
+        println!(
+            "  {} figures: RMS z {rms:.2}, largest |z| {worst:.2}",
+            zs.len()
+        );
     }
     Ok(())
 }

@@ -189,6 +189,20 @@ impl StationInput {
     }
 }
 
+/// The Ctrl-C flag: one handler per process (a second is refused), shared
+/// by every run of `--repeat` (an interrupted run ends them all).
+fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    static STOP: std::sync::OnceLock<Arc<AtomicBool>> = std::sync::OnceLock::new();
+    if let Some(s) = STOP.get() {
+        return Ok(Arc::clone(s));
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("installing the Ctrl-C handler")?;
+    Ok(Arc::clone(STOP.get_or_init(|| stop)))
+}
+
 /// The measurement on `display`: the schedule's patterns shown and
 /// recorded as they arrive, then the reconstruction; with `--serve`, the
 /// console beside it.
@@ -230,10 +244,7 @@ fn run_with(
     };
     let mut measurement =
         Measurement::prepare_checked(prepared, camera, display, solver, sequencer)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = Arc::clone(&stop);
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-        .context("installing the Ctrl-C handler")?;
+    let stop = stop_flag()?;
     let served = match args.serve {
         Some(addr) => Some(serve_measurement(
             addr,

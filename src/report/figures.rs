@@ -24,9 +24,9 @@ use serde::{Deserialize, Serialize};
 use crate::optics::zernike::{noll_to_nm, ZernikeError};
 
 mod draws;
-pub mod table;
 pub mod grid;
 pub mod joint;
+pub mod table;
 
 pub use grid::Grid;
 

@@ -7,6 +7,6 @@ pub mod figures;
 pub mod metrics;
 pub mod page;
 pub mod pictures;
-pub mod repeatability;
 pub mod records;
+pub mod repeatability;
 pub mod summary;

@@ -40,9 +40,14 @@ fn polar(nr: usize, nt: usize) -> Vec<(f64, f64, f64)> {
 
 /// Heights (nm) of coefficients `c` at the points.
 fn heights(c: &[f64], pts: &[(f64, f64, f64)]) -> Vec<f64> {
-    let s = ZernikeSurface::new(ZernikeBasis::new(c.len(), R, [0.0, 0.0]).unwrap(), c.to_vec())
-        .unwrap();
-    pts.iter().map(|&(x, y, _)| s.height_mm(x, y) * 1e6).collect()
+    let s = ZernikeSurface::new(
+        ZernikeBasis::new(c.len(), R, [0.0, 0.0]).unwrap(),
+        c.to_vec(),
+    )
+    .unwrap();
+    pts.iter()
+        .map(|&(x, y, _)| s.height_mm(x, y) * 1e6)
+        .collect()
 }
 
 /// Weighted least squares of `h` on the functions `f` of the point: the
@@ -121,8 +126,11 @@ fn pv(h: &[f64]) -> f64 {
 /// edge included), so each of the two ends moves by at most the largest
 /// slope times that distance.
 fn pv_tolerance(c: &[f64]) -> f64 {
-    let s = ZernikeSurface::new(ZernikeBasis::new(c.len(), R, [0.0, 0.0]).unwrap(), c.to_vec())
-        .unwrap();
+    let s = ZernikeSurface::new(
+        ZernikeBasis::new(c.len(), R, [0.0, 0.0]).unwrap(),
+        c.to_vec(),
+    )
+    .unwrap();
     let slope = cartesian(400)
         .iter()
         .map(|&(x, y, _)| {
@@ -153,7 +161,10 @@ fn figures_match_a_point_by_point_computation() {
     for seed in [1, 7, 38] {
         let (front, back) = surfaces(seed);
         let f = of_truth(&front, &back, R, SILICA, 1053.0).unwrap();
-        for (c, got) in [(&front, f.front.as_ref().unwrap()), (&back, f.back.as_ref().unwrap())] {
+        for (c, got) in [
+            (&front, f.front.as_ref().unwrap()),
+            (&back, f.back.as_ref().unwrap()),
+        ] {
             let h = heights(c, &pts);
             let (t, _) = remove(&h, &pts, &plane);
             let (i, _) = remove(&h, &pts, &plane_and_r2);
@@ -169,7 +180,10 @@ fn figures_match_a_point_by_point_computation() {
             let hf = heights(c, &fine);
             let (irr, _) = remove(
                 &hf,
-                &fine.iter().map(|&(x, y, _)| (x, y, 1.0)).collect::<Vec<_>>(),
+                &fine
+                    .iter()
+                    .map(|&(x, y, _)| (x, y, 1.0))
+                    .collect::<Vec<_>>(),
                 &plane_and_r2,
             );
             let tol = pv_tolerance(c);
@@ -192,18 +206,17 @@ fn figures_match_a_point_by_point_computation() {
         let (gx, gy) = (coef[1] * 1e-6, coef[2] * 1e-6);
         let wedge = gx.hypot(gy).atan().to_degrees() * 3600.0;
         let azimuth = (-gy).atan2(-gx).to_degrees().rem_euclid(360.0);
-        assert!((p.wedge_arcsec - wedge).abs() <= 1e-4 * wedge, "{p:?} {wedge}");
+        assert!(
+            (p.wedge_arcsec - wedge).abs() <= 1e-4 * wedge,
+            "{p:?} {wedge}"
+        );
         let daz = (p.wedge_azimuth_deg - azimuth + 180.0).rem_euclid(360.0) - 180.0;
         assert!(daz.abs() < 0.01, "{p:?} {azimuth}");
         let rms = weighted_rms(&rest, &pts);
         assert!((p.thickness_variation_rms_nm - rms).abs() <= 1e-4 * rms);
         assert!((p.twe_rms_nm - (SILICA - 1.0) * rms).abs() <= 1e-4 * rms);
         assert!((p.twe_rms_waves - (SILICA - 1.0) * rms / 1053.0).abs() <= 1e-4 * rms / 1053.0);
-        let d: Vec<f64> = front
-            .iter()
-            .zip(&back)
-            .map(|(a, b)| a - b)
-            .collect();
+        let d: Vec<f64> = front.iter().zip(&back).map(|(a, b)| a - b).collect();
         let hd = heights(&d, &fine);
         let unit: Vec<_> = fine.iter().map(|&(x, y, _)| (x, y, 1.0)).collect();
         let (tv, _) = remove(&hd, &unit, &plane);
@@ -280,8 +293,7 @@ fn sigmas_match_the_spread_over_realisations() {
     let (front, back) = (spec.draw(11), spec.draw(12));
     let cov = covariance(30, 3.0, 5);
     let l = cov.clone().symmetric_eigen();
-    let root = &l.eigenvectors
-        * DMatrix::from_diagonal(&l.eigenvalues.map(|v| v.max(0.0).sqrt()));
+    let root = &l.eigenvectors * DMatrix::from_diagonal(&l.eigenvalues.map(|v| v.max(0.0).sqrt()));
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(99);
     let truth = of_truth(&front, &back, R, SILICA, 1053.0).unwrap();
     let mut runs: Vec<Vec<table::Score>> = Vec::new();
@@ -306,8 +318,14 @@ fn sigmas_match_the_spread_over_realisations() {
             (vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (vals.len() - 1) as f64).sqrt();
         let reported =
             (runs.iter().map(|r| r[k].std.powi(2)).sum::<f64>() / runs.len() as f64).sqrt();
-        println!("{key}: spread {spread:.4}, reported σ {reported:.4}, ratio {:.3}", spread / reported);
-        assert!((spread / reported - 1.0).abs() < 0.3, "{key}: {spread} vs {reported}");
+        println!(
+            "{key}: spread {spread:.4}, reported σ {reported:.4}, ratio {:.3}",
+            spread / reported
+        );
+        assert!(
+            (spread / reported - 1.0).abs() < 0.3,
+            "{key}: {spread} vs {reported}"
+        );
     }
 }
 
@@ -338,11 +356,11 @@ fn the_wedge_sigma_sees_the_cross_covariance() {
     // 5 nm of Z2 against 200 nm tilts the plane along the wedge by 2·5/R
     // nm/mm: σ = 2·5/R·1e-6 rad in arcsec (the second order is 5/200 of
     // it), to 4 × the draws' 3.5 %.
-    assert!(p.wedge_azimuth_deg.min(360.0 - p.wedge_azimuth_deg) < 1e-9, "{p:?}");
-    let expected = 2.0 * 5.0 / R * 1e-6
-        * 180.0
-        / std::f64::consts::PI
-        * 3600.0;
+    assert!(
+        p.wedge_azimuth_deg.min(360.0 - p.wedge_azimuth_deg) < 1e-9,
+        "{p:?}"
+    );
+    let expected = 2.0 * 5.0 / R * 1e-6 * 180.0 / std::f64::consts::PI * 3600.0;
     assert!(
         (p.wedge_std_arcsec / expected - 1.0).abs() < 0.15,
         "{} vs {expected}",

@@ -38,6 +38,19 @@ pub(super) fn run_repeated(args: &MeasureArgs, input: &StationInput) -> anyhow::
     let path = args.out.join("repeatability.json");
     std::fs::write(&path, serde_json::to_string_pretty(&r)? + "\n")
         .with_context(|| format!("writing {}", path.display()))?;
+    // Each run's report again, now with the repeatability beside it.
+    let calibration = args
+        .station
+        .parent()
+        .filter(|dir| dir.join("report.json").is_file())
+        .map(std::path::Path::to_path_buf);
+    for f in &folders {
+        let options = mfd::report::page::ReportOptions {
+            calibration: calibration.clone(),
+            ..Default::default()
+        };
+        mfd::report::page::write(std::path::Path::new(f), None, &options)?;
+    }
     println!("repeatability over {n} runs ({}):", path.display());
     for (name, s) in [("front", &r.front), ("back", &r.back)] {
         match s {

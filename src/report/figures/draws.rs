@@ -46,7 +46,11 @@ pub(super) fn spread(input: &FigureInput<'_>, grid: &Grid) -> Spread {
     let mut done = 0;
     while done < DRAWS {
         let m = BATCH.min(DRAWS - done);
-        let mut cols = [DMatrix::zeros(t, m), DMatrix::zeros(t, m), DMatrix::zeros(t, m)];
+        let mut cols = [
+            DMatrix::zeros(t, m),
+            DMatrix::zeros(t, m),
+            DMatrix::zeros(t, m),
+        ];
         for d in 0..m {
             let z: DVector<f64> = DVector::from_fn(n, |_, _| StandardNormal.sample(&mut rng));
             let delta = &l * z;

@@ -62,8 +62,6 @@ impl Grid {
             used.row_mut(k).copy_from(&c.row(k));
         }
         let h = &self.values * used;
-        h.column_iter()
-            .map(|col| col.max() - col.min())
-            .collect()
+        h.column_iter().map(|col| col.max() - col.min()).collect()
     }
 }

@@ -43,9 +43,11 @@ pub fn scores(ours: &Figures, truth: &Figures) -> Vec<Score> {
                 continue;
             }
             let Some(sk) = std_key(key) else { continue };
-            let (Some(value), Some(std), Some(t)) =
-                (v.as_f64(), x.get(&sk).and_then(Value::as_f64), y.get(key).and_then(Value::as_f64))
-            else {
+            let (Some(value), Some(std), Some(t)) = (
+                v.as_f64(),
+                x.get(&sk).and_then(Value::as_f64),
+                y.get(key).and_then(Value::as_f64),
+            ) else {
                 continue;
             };
             let mut d = value - t;
@@ -82,7 +84,10 @@ pub fn lines(f: &Figures) -> Vec<String> {
         "  {:<6}{:>20}{:>24}{:>18}{:>18}{:>18}",
         "face", "power nm", "irregularity PV nm", "RMSt nm", "RMSi nm", "RMSa nm"
     ));
-    for (k, (name, face)) in [("front", &f.front), ("back", &f.back)].into_iter().enumerate() {
+    for (k, (name, face)) in [("front", &f.front), ("back", &f.back)]
+        .into_iter()
+        .enumerate()
+    {
         match face {
             Some(x) => out.push(face_line(name, x)),
             None => out.push(format!(
@@ -99,7 +104,10 @@ pub fn lines(f: &Figures) -> Vec<String> {
                 pm(p.wedge_arcsec, p.wedge_std_arcsec),
                 pm(p.wedge_azimuth_deg, p.wedge_azimuth_std_deg),
                 pm(p.thickness_variation_pv_nm, p.thickness_variation_pv_std_nm),
-                pm(p.thickness_variation_rms_nm, p.thickness_variation_rms_std_nm),
+                pm(
+                    p.thickness_variation_rms_nm,
+                    p.thickness_variation_rms_std_nm
+                ),
             ));
             out.push(format!(
                 "  transmitted wavefront (n = {}): RMS {} nm = {} waves at {} nm, PV {} nm",

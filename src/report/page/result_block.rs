@@ -10,6 +10,7 @@ use crate::formats::surfaces_file::SurfacesFile;
 use crate::optics::zernike::{noll_to_nm, ZernikeBasis, ZernikeSurface};
 use crate::plot::{height_map, Extent, Format, HeightMap};
 use crate::report::figures::{difference, FaceFigures, Figures};
+use crate::report::repeatability::Repeatability;
 use crate::report::summary::Summary;
 use crate::solve::surfaces::report::height_grid;
 
@@ -43,7 +44,53 @@ pub fn result_block(
     page.note(&format!("σ: {}; {}.", f.covariance, method(f)));
     faces(page, f, dir)?;
     plate(page, f);
+    repeatability(page, dir)?;
     maps(page, f, dir, scratch)
+}
+
+/// The repeatability of `mfd measure --repeat` (its `repeatability.json`
+/// two folders up, `OUT/run-K/result`), when this result is one of its runs.
+fn repeatability(page: &mut Page, dir: &Path) -> Result<(), ReportError> {
+    let Some(path) = dir
+        .parent()
+        .and_then(Path::parent)
+        .map(|d| d.join("repeatability.json"))
+        .filter(|p| p.is_file())
+    else {
+        return Ok(());
+    };
+    let text = std::fs::read_to_string(&path).map_err(|source| ReportError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    let r: Repeatability =
+        serde_json::from_str(&text).map_err(|source| ReportError::Json { path, source })?;
+    let mut rows = Vec::new();
+    for (name, s) in [("front", &r.front), ("back", &r.back)] {
+        if let Some(s) = s {
+            rows.push(vec![
+                name.to_string(),
+                format!("{:.3}", s.departure_rms_nm),
+                format!("{:.3}", s.mean_expected_error_rms_nm),
+                format!("{:.2}", s.spread_over_reported),
+            ]);
+        }
+    }
+    page.paragraph(&format!(
+        "Repeatability over {} runs (mfd measure --repeat; repeatability.json): each surface's \
+         spread over the runs (piston and tilt removed) against the error each run reported.",
+        r.runs
+    ));
+    page.table(
+        &[
+            "surface",
+            "spread RMS, nm",
+            "mean reported error RMS, nm",
+            "spread over reported",
+        ],
+        &rows,
+    );
+    Ok(())
 }
 
 fn method(f: &Figures) -> String {
@@ -151,7 +198,9 @@ pub fn rotational_irregularity_pv_nm(c: &[f64], radius_mm: f64) -> Option<f64> {
         .collect();
     let (lo, hi) = h
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     Some(hi - lo)
 }
 
@@ -178,7 +227,10 @@ fn plate(page: &mut Page, f: &Figures) {
             format!(
                 "PV {} nm, RMS {} nm",
                 pm(p.thickness_variation_pv_nm, p.thickness_variation_pv_std_nm),
-                pm(p.thickness_variation_rms_nm, p.thickness_variation_rms_std_nm)
+                pm(
+                    p.thickness_variation_rms_nm,
+                    p.thickness_variation_rms_std_nm
+                )
             ),
         ],
         vec![
