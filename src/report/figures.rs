@@ -236,9 +236,11 @@ pub fn figures(input: &FigureInput<'_>) -> Result<Figures, ZernikeError> {
         let v = face_values(c, &grid);
         let s = spread.face[k];
         let a4 = if k == 0 { 3 } else { nf + 3 };
-        let var4 = (a4 < input.covariance_nm2.nrows())
-            .then(|| input.covariance_nm2[(a4, a4)])
-            .unwrap_or(0.0);
+        let var4 = if a4 < input.covariance_nm2.nrows() {
+            input.covariance_nm2[(a4, a4)]
+        } else {
+            0.0
+        };
         Some(FaceFigures {
             power_nm: v[0],
             power_std_nm: 2.0 * 3f64.sqrt() * var4.max(0.0).sqrt(),

@@ -57,4 +57,29 @@ fn six_repeated_measurements_spread_as_reported() {
             .join(format!("run-{k}/result/summary.json"))
             .is_file());
     }
+    let html = std::fs::read_to_string(dir.path().join("run-6/result/report.html")).unwrap();
+    assert!(html.contains("Repeatability over 6 runs"));
+    // The result block: the figures, the ISO notation, the plate's maps.
+    for text in [
+        "<h2>Result</h2>",
+        "ISO 10110-5",
+        "λ = 546.07 nm",
+        "thickness variation (nm, axes mm)",
+        "transmitted wavefront (nm, axes mm)",
+    ] {
+        assert!(html.contains(text), "{text}");
+    }
+    // compare --surfaces prints the figures against the truth's.
+    let run = dir.path().join("run-1/result");
+    let log = common::mfd_ok(&[
+        "compare",
+        "--surfaces",
+        run.join("surfaces.json").to_str().unwrap(),
+        "--truth-surfaces",
+        truth.to_str().unwrap(),
+        "--summary",
+        run.join("summary.json").to_str().unwrap(),
+    ]);
+    assert!(log.contains("figures against the truth"), "{log}");
+    assert!(log.contains("17 figures: RMS z"), "{log}");
 }
