@@ -14,6 +14,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use mfd::optics::zernike::{RandomSurfaceSpec, ZernikeBasis, ZernikeSurface};
 use mfd::report::figures::{of_truth, table, FigureInput, Figures, GRID_SIDE};
 
+mod joint_budget;
 mod repeat;
 mod simulated;
 
