@@ -368,3 +368,35 @@ fn the_wedge_sigma_sees_the_cross_covariance() {
         p.wedge_std_arcsec
     );
 }
+
+/// A face not reported has no figures, nor has the plate, and each says
+/// why; the other face's figures are unchanged.
+#[test]
+fn a_withheld_face_leaves_its_figures_and_the_plates_null_with_the_reason() {
+    let (front, back) = surfaces(9);
+    let n = front.len() + back.len();
+    let cov = DMatrix::from_diagonal_element(n, n, 4.0);
+    let all = figures_of(&front, &back, &cov);
+    let withheld = mfd::report::figures::figures(&FigureInput {
+        front_nm: &front,
+        back_nm: &back,
+        covariance_nm2: &cov,
+        radius_mm: R,
+        refractive_index: SILICA,
+        wavelength_nm: 1053.0,
+        covariance_note: "test".into(),
+        withheld: [None, Some("no back reflection".into())],
+    })
+    .unwrap();
+    assert!(withheld.back.is_none() && withheld.plate.is_none());
+    assert_eq!(withheld.why_null[1].as_deref(), Some("no back reflection"));
+    assert!(withheld.why_null[2]
+        .as_deref()
+        .unwrap()
+        .contains("the back"));
+    assert_eq!(withheld.front, all.front);
+    let json = serde_json::to_value(&withheld).unwrap();
+    assert!(json["back"].is_null() && json["plate"].is_null());
+    let back: Figures = serde_json::from_value(json).unwrap();
+    assert_eq!(back, withheld);
+}
