@@ -49,7 +49,10 @@ impl StatisticsSamples<'_> {
         // that holds the signal too, and capped the ratio at ≈ n/2 times
         // the falloff's share whatever the noise (a direction of 180
         // frames never reached 30: issue 39).
-        let var = self.noise_variance(d, mus[k]).unwrap_or(var).max(1.0 / 12.0);
+        let var = self
+            .noise_variance(d, mus[k])
+            .unwrap_or(var)
+            .max(1.0 / 12.0);
         let ratio = power[k] / (std::f64::consts::LN_2 * var * t.w2);
         if k == 0 || k + 1 == power.len() {
             // The strongest power is at the band's edge: the signal may lie
