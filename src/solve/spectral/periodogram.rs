@@ -2,6 +2,12 @@
 //! windowed, zero-padded periodogram of a pixel's series over τ and its
 //! strongest peak in μ ∈ (0, 1]. With the paper's geometry the two
 //! reflections merge into one peak; the fit, not this, separates them.
+//!
+//! Three plans: an FFT on a uniform τ set; an FFT on the grid that τ sets
+//! with gaps and repeats lie on (designed schedules: each frame's windowed
+//! value added into its grid slot, the transform's length chosen so that
+//! its frequencies are exactly the direct DFT's μ grid); the direct DFT for
+//! any other τ set, and as the grid's test reference.
 
 use std::sync::Arc;
 
@@ -23,8 +29,55 @@ enum Plan {
         n_fft: usize,
         dtau: f64,
     },
+    /// τ on a grid `τ0 + kΔ` with gaps and repeats: per frame (in the
+    /// direction's τ order) its slot k; an FFT of `n_fft = PAD·(K − 1)`
+    /// points (K slots), whose frequency j is μ = j / (PAD · span), the
+    /// direct DFT's grid, `mu_count` of them.
+    Grid {
+        fft: Arc<dyn Fft<f64>>,
+        slot: Vec<u32>,
+        mu_count: usize,
+        step: f64,
+    },
     /// Any other τ set: a direct DFT on a grid of μ.
     Direct { taus: Vec<f64>, mu_grid: Vec<f64> },
+}
+
+/// Largest FFT of the grid plan, in slots (2¹⁸ points: 2 MiB of complex
+/// buffer); finer or longer grids take the direct DFT.
+const MAX_GRID_SLOTS: usize = 1 << 16;
+
+/// The grid `τ0 + kΔ` that every τ of `taus` (ascending, ≥ 2 distinct)
+/// lies on to 1e-6 Δ: Δ the smallest gap or an integer fraction of it up to
+/// 1/8; per τ its slot k. `None` when no such grid of at most
+/// [`MAX_GRID_SLOTS`] slots holds them.
+fn grid_slots(taus: &[f64]) -> Option<Vec<u32>> {
+    let (lo, hi) = (*taus.first()?, *taus.last()?);
+    let span = hi - lo;
+    let gap = taus
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&g| g > 1e-9 * span)
+        .fold(f64::INFINITY, f64::min);
+    if !gap.is_finite() {
+        return None;
+    }
+    (1..=8).find_map(|j| {
+        let dtau = gap / j as f64;
+        let slots = (span / dtau).round();
+        if slots >= MAX_GRID_SLOTS as f64 {
+            return None;
+        }
+        let k: Vec<u32> = taus
+            .iter()
+            .map(|&t| ((t - lo) / dtau).round() as u32)
+            .collect();
+        let on_grid = taus
+            .iter()
+            .zip(&k)
+            .all(|(&t, &k)| ((t - lo) / dtau - k as f64).abs() < 1e-6);
+        on_grid.then_some(k)
+    })
 }
 
 /// Periodogram plans for every direction of a design.
@@ -48,6 +101,12 @@ impl SpectrumPlans {
     /// Plans for `design`: for each direction, the frames of its most
     /// common phase sorted by τ.
     pub fn new(design: &Design) -> Self {
+        Self::with_fft(design, true)
+    }
+
+    /// [`SpectrumPlans::new`]; with `fft` false, τ sets on a grid with gaps
+    /// take the direct DFT (the grid FFT's reference).
+    fn with_fft(design: &Design, fft: bool) -> Self {
         let mut planner = FftPlanner::new();
         let mut dirs = Vec::new();
         let mut bin = Vec::new();
@@ -77,6 +136,11 @@ impl SpectrumPlans {
                 && taus
                     .windows(2)
                     .all(|w| ((w[1] - w[0]) - dtau).abs() < 1e-6 * dtau);
+            let step = 1.0 / (PAD as f64 * span);
+            let mu_count = (1.05 / step) as usize + 1;
+            let grid = (n >= 8 && !uniform && fft)
+                .then(|| grid_slots(&taus))
+                .flatten();
             let plan = if uniform {
                 let n_fft = (PAD * n).next_power_of_two();
                 Plan::Uniform {
@@ -84,11 +148,16 @@ impl SpectrumPlans {
                     n_fft,
                     dtau,
                 }
+            } else if let Some(slot) = grid {
+                let slots = slot.last().map_or(0, |&k| k as usize);
+                Plan::Grid {
+                    fft: planner.plan_fft_forward(PAD * slots),
+                    slot,
+                    mu_count,
+                    step,
+                }
             } else {
-                let step = 1.0 / (PAD as f64 * span);
-                let mu_grid = (0..=(1.05 / step) as usize)
-                    .map(|k| k as f64 * step)
-                    .collect();
+                let mu_grid = (0..mu_count).map(|k| k as f64 * step).collect();
                 Plan::Direct { taus, mu_grid }
             };
             dirs.push((idx, window, plan));
@@ -105,6 +174,13 @@ impl SpectrumPlans {
     /// `(μ, peak power / median power)`. `y` is indexed by frame; excluded
     /// samples are NaN and replaced by the mean.
     pub fn peak(&self, d: usize, y: &[f64]) -> Option<(f64, f64)> {
+        let (mus, power) = self.spectrum(d, y)?;
+        refine_peak(&mus, &power, 3.0 * self.bin[d])
+    }
+
+    /// Direction `d`'s periodogram of `y` (indexed by frame, NaN
+    /// excluded): its μ grid and power; `None` with fewer than 8 samples.
+    fn spectrum(&self, d: usize, y: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
         let (idx, window, plan) = &self.dirs[d];
         let vals: Vec<f64> = idx.iter().map(|&i| y[i as usize]).collect();
         let good: Vec<f64> = vals.iter().copied().filter(|v| v.is_finite()).collect();
@@ -132,6 +208,25 @@ impl SpectrumPlans {
                     buf[..=m].iter().map(|c| c.norm_sqr()).collect::<Vec<f64>>(),
                 )
             }
+            Plan::Grid {
+                fft,
+                slot,
+                mu_count,
+                step,
+            } => {
+                let n_fft = fft.len();
+                let mut buf = vec![Complex::new(0.0, 0.0); n_fft];
+                for (&k, &v) in slot.iter().zip(&centred) {
+                    buf[k as usize].re += v;
+                }
+                let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
+                fft.process_with_scratch(&mut buf, &mut scratch);
+                // Frequency j is μ = j·step; past the grid's Nyquist the
+                // transform repeats (period n_fft), as the DFT does.
+                let mus = (0..*mu_count).map(|j| j as f64 * step).collect();
+                let power = (0..*mu_count).map(|j| buf[j % n_fft].norm_sqr()).collect();
+                (mus, power)
+            }
             Plan::Direct { taus, mu_grid } => {
                 let p = mu_grid
                     .iter()
@@ -148,7 +243,7 @@ impl SpectrumPlans {
                 (mu_grid.clone(), p)
             }
         };
-        refine_peak(&mus, &power, 3.0 * self.bin[d])
+        Some((mus, power))
     }
 }
 
@@ -177,3 +272,7 @@ pub(super) fn refine_peak(mus: &[f64], power: &[f64], mu_min: f64) -> Option<(f6
     }
     Some((mu, pk / median))
 }
+
+#[cfg(test)]
+#[path = "periodogram_tests.rs"]
+mod tests;

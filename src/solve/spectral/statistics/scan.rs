@@ -42,7 +42,17 @@ impl StatisticsSamples<'_> {
         let (k, _) = power.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
         // Pure noise of variance σ² has periodogram power with mean
         // σ² Σ w², median ln 2 of that: the ratio is on the scale of
-        // [`super::pixel::DETECTION_RATIO`].
+        // [`super::pixel::DETECTION_RATIO`], which the series engine holds
+        // against the periodogram's median over the whole spectrum, the
+        // noise's. σ² is the residual variance of the peak's own sinusoid
+        // (two quadratures and the background), not the series' variance:
+        // that holds the signal too, and capped the ratio at ≈ n/2 times
+        // the falloff's share whatever the noise (a direction of 180
+        // frames never reached 30: issue 39).
+        let var = self
+            .noise_variance(d, mus[k])
+            .unwrap_or(var)
+            .max(1.0 / 12.0);
         let ratio = power[k] / (std::f64::consts::LN_2 * var * t.w2);
         if k == 0 || k + 1 == power.len() {
             // The strongest power is at the band's edge: the signal may lie
@@ -51,6 +61,38 @@ impl StatisticsSamples<'_> {
         }
         let (mu, _) = refine_peak(&mus, &power, 3.0 * t.bin)?;
         Some((mu, ratio))
+    }
+
+    /// The residual variance of direction `d`'s samples after the
+    /// least-squares background and one sinusoid at `mu` with the falloff
+    /// the scans start from (κ0, the κ range's `[−κ0, 16κ0]`) and a free
+    /// phase (two quadratures: the pair scan's columns with the second one
+    /// a quarter cycle from the first): the noise the periodogram's peak is
+    /// held against. `None` with fewer than 4 samples or a singular fit.
+    fn noise_variance(&self, d: usize, mu: f64) -> Option<f64> {
+        let pd = &self.dirs[d];
+        let t = &self.tables.dirs[d];
+        let kappa = (-self.tables.kappa_range[0]).max(0.0);
+        let quarter = C64::new(0.0, 1.0);
+        let mut gram: Vec<PairNode> = t
+            .gram
+            .tau
+            .iter()
+            .map(|&tau| {
+                let mut nd = PairNode::new(tau, kappa, [mu - pd.mu_c, 0.0, 0.0]);
+                nd.off = quarter;
+                nd
+            })
+            .collect();
+        // ½Σ M |a0|², the same for the quadrature; Re(a0 ā1) = 0.
+        let m00: f64 = gram
+            .iter()
+            .zip(pd.hm.iter())
+            .map(|(nd, m)| m * nd.cur.norm_sqr())
+            .sum();
+        let sums = self.pair_sums(d, &mut gram, [m00, 0.0]);
+        let (_, rss) = self.pair_fit(d, &sums);
+        (pd.n > 4.0 && rss.is_finite()).then(|| rss / (pd.n - 3.0))
     }
 
     /// The linear fits of `count` front/back pairs along direction `dir`
