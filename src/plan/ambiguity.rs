@@ -111,9 +111,14 @@ pub fn expected_view(station: &Station, opts: &PlanOptions) -> Result<TracedView
     let bent = ZernikeBasis::new(4, e.aperture_radius_mm, centre)
         .and_then(|b| ZernikeSurface::new(b, c))
         .map_err(crate::budget::scene::BudgetError::from)?;
+    // On the plate as made: the declared wedge stays in the back's tilts.
+    let back = e
+        .wedge
+        .added_to(&bent)
+        .map_err(crate::budget::scene::BudgetError::from)?;
     let mut view = TracedView::trace(
         station,
-        &Plate::new(station, bent.clone(), bent, DEFAULT_EDGE_MARGIN_MM),
+        &Plate::new(station, bent, back, DEFAULT_EDGE_MARGIN_MM),
     );
     for p in &mut view.pixels {
         if opts.back_scale == 0.0 {

@@ -4,7 +4,7 @@
 //! 25× the noise. Before this pass both were reported as found.
 
 use super::*;
-use crate::solve::spectral::{flat_plate_prior, PixelResult};
+use crate::solve::spectral::{nominal_plate_prior, PixelResult};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
@@ -27,7 +27,7 @@ fn scene() -> (Station, TracedView, SpectralMaps) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/public-small/station.toml");
     let station = Station::load(&path).unwrap();
-    let prior = flat_plate_prior(&station, 0.0).unwrap();
+    let prior = nominal_plate_prior(&station, 0.0).unwrap();
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(19);
     let sigma = 0.25;
     let pixels = prior
