@@ -2,7 +2,7 @@
 //! the schedule's ambiguity function (its spectral window over the
 //! fringe coordinate), the unambiguous range it gives against the prior's
 //! spread (how far the true screen points may lie from the station's
-//! flat-plate prediction), and the spectral stage's own start (its
+//! nominal-plate prediction), and the spectral stage's own start (its
 //! periodogram peak) on noise-free series of sample pixels.
 
 use serde::Serialize;
@@ -131,7 +131,7 @@ pub fn expected_view(station: &Station, opts: &PlanOptions) -> Result<TracedView
     Ok(view)
 }
 
-/// How far the true screen points may lie from the flat-plate prediction:
+/// How far the true screen points may lie from the nominal-plate prediction:
 /// the station's share plus the largest shift a defocus of
 /// `surface_nm` RMS on both faces makes (traced).
 pub fn prior_spread_px(

@@ -1,5 +1,5 @@
 //! Case 6 of issue 19 on maps built from the independent fixture's
-//! station: every pixel measured at its flat-plate prediction with
+//! station: every pixel measured at its nominal-plate prediction with
 //! noise, then some pixels given an alias (30–100 px off) or a residual
 //! 25× the noise. Before this pass both were reported as found.
 

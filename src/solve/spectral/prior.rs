@@ -60,7 +60,7 @@ fn backs(view: &TracedView) -> usize {
 /// The prior with the solver's view of it: the candidate pixels and, per
 /// candidate, the back-minus-front offset borrowed at the rim.
 pub(super) struct GeometryPrior {
-    /// The flat-plate prediction of every camera pixel.
+    /// The nominal-plate prediction of every camera pixel.
     pub(super) view: TracedView,
     /// Camera pixel index of each candidate, row-major.
     pub(super) candidates: Vec<u32>,

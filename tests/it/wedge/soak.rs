@@ -191,6 +191,7 @@ fn random_plates_are_measured_honestly_or_refused_in_words() {
     let mut worst: (f64, u64) = (1.0, 0);
     for &seed in &seeds {
         let draw = Draw::new(seed);
+        eprintln!("seed {seed}: {draw:?}");
         let Some(truth) = draw.station() else {
             impossible += 1;
             continue;
