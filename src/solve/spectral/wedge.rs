@@ -45,6 +45,13 @@ const GRID_BINS: f64 = 0.25;
 /// the station's error.
 const FRONT_MASK_BINS: f64 = 3.0;
 
+/// How far beyond the front's masked lobe (centred on the front's own
+/// peak) a found back point must lie for it to refute a declared back
+/// point inside the lobe: beyond the Hann main lobe (2 bins) and the mask's
+/// bin of slack, a peak of a twentieth of the front's power is no sidelobe
+/// (−31 dB), half a bin more keeps the lobe's edge out.
+const CLEAR_BINS: f64 = 0.5;
+
 /// What the search found.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WedgeSearch {
@@ -72,6 +79,8 @@ struct Sample {
     /// peak much weaker than the back's (the third reflection, R² of the
     /// front's; a display harmonic) is not the back.
     least: Vec<f64>,
+    /// Per direction: the front's fringe coordinate μ (the mask's centre).
+    front_mu: Vec<f64>,
 }
 
 /// One sample pixel's back point at a slope, and its Jacobian per unit slope.
@@ -112,17 +121,21 @@ pub fn search_wedge(
         .zip(&lin0)
         .map(|((_, y), l)| {
             let (lin, front) = l.as_ref()?;
-            let (power, least) = (0..design.axes.len())
-                .map(|d| {
-                    let (p, front_peak) =
-                        periodogram(design, y, d, &grid, design.axes[d].s(front[0], front[1]));
-                    (
-                        p,
-                        (front_peak * lin.ratio2 / BACK_POWER_SLACK).max(SEEN_RATIO),
-                    )
-                })
-                .unzip();
-            Some(Sample { power, least })
+            let mut power = Vec::new();
+            let mut least = Vec::new();
+            let mut front_mu = Vec::new();
+            for d in 0..design.axes.len() {
+                let predicted = design.axes[d].s(front[0], front[1]);
+                let (p, peak, mu) = periodogram(design, y, d, &grid, predicted);
+                power.push(p);
+                least.push((peak * lin.ratio2 / BACK_POWER_SLACK).max(SEEN_RATIO));
+                front_mu.push(mu);
+            }
+            Some(Sample {
+                power,
+                least,
+                front_mu,
+            })
         })
         .collect();
     let strip = |lin: Vec<Option<(Lin, [f64; 2])>>| -> Vec<Option<Lin>> {
@@ -157,8 +170,8 @@ pub fn search_wedge(
         step / 4.0,
     );
     let lin_found = strip(linearised(station, series, fine, edge_margin_mm)?);
-    let seen_share = seen(design, &samples, &lin_found, &grid);
-    let declared_seen_share = seen(design, &samples, &lin0, &grid);
+    let seen_share = seen(design, &samples, &lin_found, None, &grid);
+    let declared_seen_share = seen(design, &samples, &lin0, Some(&lin_found), &grid);
     let mut shifts: Vec<f64> = lin_found
         .iter()
         .zip(&lin0)
@@ -254,9 +267,16 @@ fn linearised(
 }
 
 /// Direction `d`'s periodogram of `y` on the μ grid over `[0, 1.05]`,
-/// divided by its median, the front's lobe about `mask` set to the median;
-/// and the largest normalised power in that lobe (the front's peak).
-fn periodogram(design: &Design, y: &[f64], d: usize, grid: &Grid, mask: f64) -> (Vec<f64>, f64) {
+/// divided by its median, the front's lobe (about its peak within the mask
+/// of `mask`, the predicted front) set to the median; and that peak's
+/// normalised power and μ.
+fn periodogram(
+    design: &Design,
+    y: &[f64],
+    d: usize,
+    grid: &Grid,
+    mask: f64,
+) -> (Vec<f64>, f64, f64) {
     let frames: Vec<(f64, f64, f64)> = design
         .frames
         .iter()
@@ -266,7 +286,7 @@ fn periodogram(design: &Design, y: &[f64], d: usize, grid: &Grid, mask: f64) -> 
         .collect();
     let n = (1.05 / grid.step[d]) as usize + 1;
     if frames.len() < 8 {
-        return (vec![1.0; n], 1.0);
+        return (vec![1.0; n], 1.0, mask);
     }
     let mean = frames.iter().map(|f| f.2).sum::<f64>() / frames.len() as f64;
     // A Hann window over τ: the front's sidelobes (−13 dB unwindowed) would
@@ -312,18 +332,24 @@ fn periodogram(design: &Design, y: &[f64], d: usize, grid: &Grid, mask: f64) -> 
         .unwrap_or(1.0)
         .max(1e-300);
     let half = FRONT_MASK_BINS * grid.bins[d];
-    let mut front_peak: f64 = 1.0;
+    // The lobe is centred where the front's peak is, within the mask of
+    // its prediction: an element or a front a little off its nominal place
+    // moves the whole lobe, and its shoulder must not pass for the back.
+    let mut front = (1.0f64, mask);
     for (i, p) in power.iter_mut().enumerate() {
         let mu = i as f64 * grid.step[d];
         *p /= median;
-        if (mu - mask).abs() <= half {
-            front_peak = front_peak.max(*p);
+        if (mu - mask).abs() <= half && *p > front.0 {
+            front = (*p, mu);
         }
-        if i < lo || (mu - mask).abs() <= half {
+    }
+    for (i, p) in power.iter_mut().enumerate() {
+        let mu = i as f64 * grid.step[d];
+        if i < lo || (mu - front.1).abs() <= half {
             *p = 1.0;
         }
     }
-    (power, front_peak)
+    (power, front.0, front.1)
 }
 
 /// The slope step that moves the most-moving pixel's back point by a
@@ -398,24 +424,50 @@ fn score(
         .sum()
 }
 
-/// The share of samples whose back point (unmoved) is seen in every direction.
-fn seen(design: &Design, samples: &[Option<Sample>], lin: &[Option<Lin>], grid: &Grid) -> f64 {
-    let pairs: Vec<_> = samples
-        .iter()
-        .zip(lin)
-        .filter_map(|(s, l)| Some((s.as_ref()?, l.as_ref()?)))
-        .collect();
-    let n = pairs
-        .iter()
-        .filter(|(s, l)| {
-            (0..design.axes.len()).all(|d| {
+/// The share of samples whose back point (unmoved) is seen: outside the
+/// front's lobe in at least one direction, and a peak of at least the
+/// sample's least power in every direction where it is outside. A back
+/// point inside the front's lobe in every direction cannot be told from
+/// the front: with `against` (the found back points) it counts as seen
+/// unless the found one stands clear of the lobe ([`CLEAR_BINS`] beyond
+/// it in some direction), so that a lobe's shoulder never refutes it.
+fn seen(
+    design: &Design,
+    samples: &[Option<Sample>],
+    lin: &[Option<Lin>],
+    against: Option<&[Option<Lin>]>,
+    grid: &Grid,
+) -> f64 {
+    let mut n = 0usize;
+    let mut total = 0usize;
+    for (k, (s, l)) in samples.iter().zip(lin).enumerate() {
+        let (Some(s), Some(l)) = (s, l) else {
+            continue;
+        };
+        total += 1;
+        let offset = |l: &Lin, d: usize| {
+            (design.axes[d].s(l.back[0], l.back[1]) - s.front_mu[d]).abs() / grid.bins[d]
+        };
+        let dirs = 0..design.axes.len();
+        let outside: Vec<usize> = dirs
+            .clone()
+            .filter(|&d| offset(l, d) > FRONT_MASK_BINS)
+            .collect();
+        let ok = if outside.is_empty() {
+            against.and_then(|a| a[k].as_ref()).is_some_and(|f| {
+                dirs.clone()
+                    .all(|d| offset(f, d) <= FRONT_MASK_BINS + CLEAR_BINS)
+            })
+        } else {
+            outside.iter().all(|&d| {
                 let x = design.axes[d].s(l.back[0], l.back[1]) / grid.step[d];
                 // The peak's top within two grid steps (half a bin) either side.
-                (-2..=2).any(|k| lookup(&s.power[d], x + f64::from(k)) >= s.least[d])
+                (-2..=2).any(|i| lookup(&s.power[d], x + f64::from(i)) >= s.least[d])
             })
-        })
-        .count();
-    n as f64 / pairs.len().max(1) as f64
+        };
+        n += usize::from(ok);
+    }
+    n as f64 / total.max(1) as f64
 }
 
 fn moved(l: &Lin, ds: [f64; 2]) -> (f64, f64) {

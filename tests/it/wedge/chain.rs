@@ -184,7 +184,13 @@ pub fn run_scored(
         ],
         wedge_note,
         used_found,
-        withheld: stage.withheld.clone(),
+        // A back the solver did not fit (its σ zero) is not reported.
+        withheld: [
+            stage.withheld[0].clone(),
+            stage.withheld[1]
+                .clone()
+                .or_else(|| (!sol.back_fitted).then(|| "back not fitted".to_string())),
+        ],
     })
 }
 
