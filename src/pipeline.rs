@@ -29,6 +29,7 @@ pub mod result_dir;
 mod result_files;
 mod screen_points;
 mod station_uncertainty;
+pub mod wedge;
 
 pub use crate::solve::direct::DirectReport;
 mod error;
@@ -89,6 +90,9 @@ pub struct Options {
     /// The wavelength of the transmitted wavefront's figures in waves, nm;
     /// `None`: [`crate::report::figures::DEFAULT_WAVELENGTH_NM`].
     pub wavelength_nm: Option<f64>,
+    /// Start from the station's wedge without looking in the frames for
+    /// the back reflection first ([`wedge::check_wedge`]).
+    pub skip_wedge_search: bool,
 }
 
 /// The spectral stage's result.
@@ -104,6 +108,10 @@ pub struct SpectralStage {
     pub solve_s: f64,
     /// The points checked against the noise and the station.
     pub consistency: Consistency,
+    /// The wedge the frames show, where it was looked for
+    /// ([`wedge::check_wedge`]); when `used_found`, every stage started
+    /// from it instead of the station's.
+    pub wedge: Option<wedge::WedgeCheck>,
 }
 
 /// The surface stage's result.
@@ -157,20 +165,23 @@ pub fn reconstruct(
 ) -> Result<Reconstruction, PipelineError> {
     // Every stage works in the element's own frame (station v2's pose);
     // the surfaces come out in it, as the spec reports them.
-    let station = &station.element_frame();
+    let mut frame_station = station.element_frame();
     let owned;
     let (first, solver): (First, Option<&SpectralSolver>) = match input {
         Input::Acquisition(acq) => {
-            let (stage, solver) = read_acquisition(acq, station, options, progress)?;
+            let (stage, solver, used) = read_acquisition(acq, &frame_station, options, progress)?;
+            // The wedge the frames show, where the station's was not it.
+            frame_station = used;
             owned = solver;
             (First::Spectral(stage), Some(&owned))
         }
         Input::Streamed(solver) => (
-            First::Spectral(spectral_stage(solver, station, options, 0.0, None)?),
+            First::Spectral(spectral_stage(solver, &frame_station, options, 0.0, None)?),
             Some(&*solver),
         ),
         Input::ScreenPoints(points) => (First::Points(points), None),
     };
+    let station = &frame_station;
     let mut surfaces = options
         .surfaces
         .as_ref()
@@ -191,29 +202,38 @@ pub fn reconstruct(
 
 /// Reads every frame of `acq` into a new spectral solver, calling
 /// `progress(done, total)` after each, and runs the spectral stage; returns
-/// the stage and the solver (the surface-domain estimator fits its frames).
+/// the stage, the solver (the surface-domain estimator fits its frames) and
+/// the station every stage started from: `station`, or it with the wedge
+/// the frames show ([`wedge::check_wedge`]).
 fn read_acquisition(
     acq: &mut Acquisition,
     station: &Station,
     options: &Options,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(SpectralStage, SpectralSolver), PipelineError> {
+) -> Result<(SpectralStage, SpectralSolver, Station), PipelineError> {
     crate::acquire::acquisition::check_against_station(acq, station)?;
     let t0 = Instant::now();
     acq.check_resolution(station.camera.width, station.camera.height)?;
+    let (station, wedge) = if options.skip_wedge_search {
+        (station.clone(), None)
+    } else {
+        wedge::check_wedge(acq, station, &options.spectral)?
+    };
+    let station = &station;
     let mut solver = SpectralSolver::new(station, acq.frames(), options.spectral.clone())?;
     let total = acq.frames().len();
     let max_count = solver
         .push_acquisition(acq, total, progress)
         .map_err(FeedError::into_cause::<PipelineError>)?;
-    let stage = spectral_stage(
+    let mut stage = spectral_stage(
         &mut solver,
         station,
         options,
         t0.elapsed().as_secs_f64(),
         Some(max_count),
     )?;
-    Ok((stage, solver))
+    stage.wedge = wedge;
+    Ok((stage, solver, station.clone()))
 }
 
 /// Where the surface stage's screen points come from.
@@ -407,5 +427,6 @@ fn spectral_stage(
         read_s,
         solve_s: t.elapsed().as_secs_f64(),
         consistency,
+        wedge: None,
     })
 }

@@ -109,7 +109,7 @@ impl SpectralArgs {
 pub struct CheckArgs {
     /// Largest departure of either surface from flat, nm RMS of defocus,
     /// that the check of the screen points against the station allows:
-    /// points displaced from the station's flat-plate prediction by more
+    /// points displaced from the station's nominal-plate prediction by more
     /// than such surfaces (and the station's tolerance) explain flag the
     /// result as inconsistent, and single pixels as far from the station.
     #[arg(long, default_value_t = mfd::pipeline::DEFAULT_MAX_DEPARTURE_NM, value_parser = check::positive)]

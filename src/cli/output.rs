@@ -37,6 +37,9 @@ pub fn write_and_print(
     if let Some(s) = &rec.spectral {
         summarise(&s.maps, s.fitted_pixels, s.read_s, s.solve_s);
         println!("check against the station: {}", s.consistency.note);
+        if let Some(w) = &s.wedge {
+            println!("wedge: {}", w.describe());
+        }
     }
     if let Some(Err(e)) = &rec.surfaces {
         let msg = format!("surface stage: {e}");

@@ -82,6 +82,13 @@ pub struct ReconstructArgs {
     surfaces: super::surfaces_stage::SurfaceArgs,
     #[command(flatten)]
     checks: super::CheckArgs,
+    /// Start from the station's wedge (element.wedge_arcmin, 0 when absent)
+    /// without first looking in the frames for where the back reflection
+    /// lies. By default a few hundred sample pixels are searched over the
+    /// full spectrum first, and a wedge the station does not declare is
+    /// measured from (and named), or refused with the wedge seen.
+    #[arg(long)]
+    keep_station_wedge: bool,
 }
 
 /// Runs `mfd reconstruct`.
@@ -133,6 +140,7 @@ pub fn run(args: &ReconstructArgs) -> anyhow::Result<()> {
         max_expected_nm,
         limits: args.checks.limits(),
         wavelength_nm: args.surfaces.wavelength_nm,
+        skip_wedge_search: args.keep_station_wedge,
     };
     let bar = ProgressBar::new(acq.frames().len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")

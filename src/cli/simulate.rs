@@ -24,7 +24,8 @@ pub struct SimulateArgs {
     #[arg(long, conflicts_with = "random_surfaces")]
     surfaces: Option<PathBuf>,
     /// Draw random surfaces with this seed instead: Noll terms 4–36 at
-    /// 60 nm RMS each face, tilts of 100 nm standard deviation.
+    /// 60 nm RMS each face, tilts of 100 nm standard deviation (on the back,
+    /// beside the tilts of the wedge the station declares).
     #[arg(long, value_name = "SEED")]
     random_surfaces: Option<u64>,
     /// Output acquisition folder.
@@ -178,5 +179,8 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
 fn random_pair(station: &Station, seed: u64) -> anyhow::Result<(ZernikeSurface, ZernikeSurface)> {
     let e = &station.element;
     let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
-    Ok(RandomSurfaceSpec::default().draw_pair(e.aperture_radius_mm, centre, seed)?)
+    let (front, back) =
+        RandomSurfaceSpec::default().draw_pair(e.aperture_radius_mm, centre, seed)?;
+    // Drawn departures on the plate as made: the declared wedge in the back's tilts.
+    Ok((front, e.wedge.added_to(&back)?))
 }

@@ -7,7 +7,7 @@ use clap::Args;
 use nalgebra::Point2;
 
 use mfd::optics::station::{
-    CameraProfile, DisplayProfile, Element, Pose, Station, SymmetricLayout,
+    CameraProfile, DisplayProfile, Element, Pose, Station, SymmetricLayout, Wedge,
 };
 
 /// Arguments of `mfd station`.
@@ -45,6 +45,14 @@ pub struct StationArgs {
     /// of `mfd-station/2`: an element mounted at an angle to the reference plane).
     #[arg(long, value_parser = super::check::range(-45.0, 45.0, "degrees of tilt"), value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
     element_tilt_deg: Vec<f64>,
+    /// The wedge the plate was made with, arcmin (`element.wedge_arcmin` of
+    /// `mfd-station/2`: the angle between its faces; at most 120).
+    #[arg(long, value_parser = super::check::range(0.0, 120.0, "arcmin of wedge"), default_value_t = 0.0)]
+    wedge_arcmin: f64,
+    /// The direction in the element's frame along which the plate thins,
+    /// degrees (`element.wedge_azimuth_deg`).
+    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "degrees of azimuth"), default_value_t = 0.0, allow_negative_numbers = true)]
+    wedge_azimuth_deg: f64,
     /// Where to write the station.toml.
     #[arg(long)]
     out: PathBuf,
@@ -65,12 +73,18 @@ pub fn run(args: &StationArgs) -> anyhow::Result<()> {
             aperture_radius_mm: args.aperture_radius_mm,
             aperture_center_mm: Point2::origin(),
             pose: Pose::default(),
+            wedge: Wedge {
+                arcmin: args.wedge_arcmin,
+                azimuth_deg: args.wedge_azimuth_deg,
+            },
         },
     };
     let mut station = layout.build(&camera, &display)?;
     if let [rx, ry] = args.element_tilt_deg[..] {
         station.element.pose.tilt_deg = [rx, ry];
-        // Through the file form: the tilted station is checked as a loaded one is.
+    }
+    if station.needs_version_2() {
+        // Through the file form: a tilted or wedged element is checked as a loaded one is.
         station = Station::from_file(&station.to_file(), &args.out)?;
     }
     let header = format!(

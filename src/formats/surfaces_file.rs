@@ -385,8 +385,9 @@ impl crate::outcome::Classify for SurfacesOrFlatError {
 }
 
 /// Front and back surfaces from a `surfaces.json` (`mfd-surfaces/1` or
-/// `/2`; a `null` surface is flat), or flat surfaces over the station's
-/// aperture when none is given: the expected surfaces of a simulation, a
+/// `/2`; a `null` surface is flat), or the nominal plate over the station's
+/// aperture when none is given (a flat front; the back flat, or the plane
+/// of the wedge the station declares): the expected surfaces of a simulation, a
 /// trace or a budget.
 ///
 /// # Errors
@@ -395,12 +396,11 @@ pub fn surfaces_or_flat(
     path: Option<&Path>,
     station: &Station,
 ) -> Result<(ZernikeSurface, ZernikeSurface), SurfacesOrFlatError> {
-    let e = &station.element;
-    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
     let Some(path) = path else {
-        let flat = ZernikeSurface::flat(e.aperture_radius_mm, centre)
-            .map_err(SurfacesOrFlatError::Flat)?;
-        return Ok((flat.clone(), flat));
+        return station
+            .element
+            .nominal_surfaces(1)
+            .map_err(SurfacesOrFlatError::Flat);
     };
     let file = SurfacesFile::load(path)?;
     let make = |coefficients: Option<&Vec<f64>>| {

@@ -274,7 +274,7 @@ fn note(c: &Consistency, worst: f64, far_share: f64) -> String {
     } else if c.consistent {
         format!(
             "the screen points agree with the station: median displacement {worst:.2} px \
-             from its flat-plate prediction, within the {allowed_px:.1} px that surfaces of up \
+             from its nominal-plate prediction, within the {allowed_px:.1} px that surfaces of up \
              to {:.0} nm RMS and the station's tolerance allow; {far_pixels} pixels flagged \
              far from it, {poor_fit_pixels} with a residual far above the noise",
             c.max_departure_nm
@@ -282,7 +282,7 @@ fn note(c: &Consistency, worst: f64, far_share: f64) -> String {
     } else {
         format!(
             "the screen points contradict the station: median displacement {worst:.1} px from \
-             its flat-plate prediction (allowed {allowed_px:.1} px for surfaces of up to {:.0} \
+             its nominal-plate prediction (allowed {allowed_px:.1} px for surfaces of up to {:.0} \
              nm RMS and the station's tolerance), {:.0} % of {pixels} pixels far from it: a \
              wrong station file, τ scale or direction label in the manifest?",
             c.max_departure_nm,

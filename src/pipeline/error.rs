@@ -63,6 +63,11 @@ pub enum PipelineError {
     /// looked at and what was found, in words.
     #[error("{0}")]
     NoSignal(String),
+    /// The frames show the back reflection of a wedge the station does
+    /// not declare, and not clearly enough to measure from: the wedge seen
+    /// and the station fields to set, in words.
+    #[error("{0}")]
+    UndeclaredWedge(String),
     /// A station uncertainty file could not be read.
     #[error(transparent)]
     Uncertainty(#[from] UncertaintyError),
@@ -109,6 +114,9 @@ impl crate::outcome::Classify for PipelineError {
             PipelineError::Uncertainty(e) => e.outcome(),
             PipelineError::Station(e) => e.outcome(),
             PipelineError::NoSignal(_) => Some(Outcome::NoSignal),
+            // The station file does not describe the plate: it is the
+            // input to correct.
+            PipelineError::UndeclaredWedge(_) => Some(Outcome::Input),
             PipelineError::Shape { .. }
             | PipelineError::Output { .. }
             | PipelineError::UncertaintyOfAnotherStation { .. } => Some(Outcome::Input),

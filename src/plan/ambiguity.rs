@@ -2,7 +2,7 @@
 //! the schedule's ambiguity function (its spectral window over the
 //! fringe coordinate), the unambiguous range it gives against the prior's
 //! spread (how far the true screen points may lie from the station's
-//! flat-plate prediction), and the spectral stage's own start (its
+//! nominal-plate prediction), and the spectral stage's own start (its
 //! periodogram peak) on noise-free series of sample pixels.
 
 use serde::Serialize;
@@ -111,9 +111,14 @@ pub fn expected_view(station: &Station, opts: &PlanOptions) -> Result<TracedView
     let bent = ZernikeBasis::new(4, e.aperture_radius_mm, centre)
         .and_then(|b| ZernikeSurface::new(b, c))
         .map_err(crate::budget::scene::BudgetError::from)?;
+    // On the plate as made: the declared wedge stays in the back's tilts.
+    let back = e
+        .wedge
+        .added_to(&bent)
+        .map_err(crate::budget::scene::BudgetError::from)?;
     let mut view = TracedView::trace(
         station,
-        &Plate::new(station, bent.clone(), bent, DEFAULT_EDGE_MARGIN_MM),
+        &Plate::new(station, bent, back, DEFAULT_EDGE_MARGIN_MM),
     );
     for p in &mut view.pixels {
         if opts.back_scale == 0.0 {
@@ -126,7 +131,7 @@ pub fn expected_view(station: &Station, opts: &PlanOptions) -> Result<TracedView
     Ok(view)
 }
 
-/// How far the true screen points may lie from the flat-plate prediction:
+/// How far the true screen points may lie from the nominal-plate prediction:
 /// the station's share plus the largest shift a defocus of
 /// `surface_nm` RMS on both faces makes (traced).
 pub fn prior_spread_px(

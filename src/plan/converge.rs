@@ -75,7 +75,7 @@ pub struct DirectionBasin {
 pub struct Convergence {
     /// Per direction.
     pub directions: Vec<DirectionBasin>,
-    /// How far the true points may lie from the flat-plate prediction, px.
+    /// How far the true points may lie from the nominal-plate prediction, px.
     pub prior_spread_px: f64,
     /// Fraction of the sample pixels whose own iteration, both
     /// reflections, noise-free, reaches their true points from the flat

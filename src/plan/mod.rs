@@ -99,7 +99,7 @@ pub struct PlanOptions {
     /// back (one reflection, nothing to separate).
     pub back_scale: f64,
     /// Expected size of either surface's departure from flat, nm RMS: how
-    /// far the true screen points may lie from the flat-plate prediction.
+    /// far the true screen points may lie from the nominal-plate prediction.
     pub surface_nm: f64,
     /// The station's own share of the prior's spread (calibration, the
     /// element's placement), screen px.

@@ -70,7 +70,7 @@ pub struct Consistency {
     /// Pixels compared (with a measured front point and a predicted one).
     pub pixels: usize,
     /// Median displacement of the measured front points from the station's
-    /// flat-plate prediction, screen px (u, v); `null` when none was
+    /// nominal-plate prediction, screen px (u, v); `null` when none was
     /// measured.
     pub median_displacement_px: Option<[f64; 2]>,
     /// The same for the back, where measured.

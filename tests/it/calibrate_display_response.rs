@@ -13,7 +13,7 @@ use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{phase_shift_patterns, Luminance, PhaseShiftParams, PhaseShiftRenderer};
 use mfd::solve::spectral::phase::{profile_response, PhaseModel, Response, ResponseCurve};
-use mfd::solve::spectral::{flat_plate_prior, SpectralConfig, SpectralSolver};
+use mfd::solve::spectral::{nominal_plate_prior, SpectralConfig, SpectralSolver};
 
 const TAUS: [f64; 4] = [1.0, 4.0, 16.0, 64.0];
 
@@ -90,7 +90,7 @@ fn run(params: PhaseShiftParams, gamma: Option<f64>, curve: Option<ResponseCurve
         ..SpectralConfig::default()
     };
     let frames = FrameInfo::from_patterns(&patterns);
-    let prior = flat_plate_prior(&station, config.edge_margin_mm).unwrap();
+    let prior = nominal_plate_prior(&station, config.edge_margin_mm).unwrap();
     let mut solver = SpectralSolver::with_prior(&station, &frames, config, prior).unwrap();
     let mut buf = vec![0u16; station.camera.pixel_count()];
     for (k, p) in patterns.iter().enumerate() {

@@ -108,6 +108,7 @@ proptest! {
                 aperture_radius_mm: 25.5,
                 aperture_center_mm: nalgebra::Point2::origin(),
                 pose: mfd::optics::station::Pose::default(),
+                wedge: mfd::optics::station::Wedge::NONE,
             },
         };
         let cam = mfd::optics::station::CameraProfile::load(&common::repo("hw/camera/baumer-txg12.toml")).unwrap();

@@ -73,3 +73,4 @@ mod surfaces_fixture;
 mod surfaces_noise;
 mod surfaces_v2;
 mod trace_fixture;
+mod wedge;

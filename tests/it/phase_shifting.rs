@@ -13,7 +13,7 @@ use mfd::optics::trace::{Plate, TracedView};
 use mfd::optics::zernike::ZernikeSurface;
 use mfd::sim::{phase_shift_patterns, PhaseShiftParams, PhaseShiftRenderer};
 use mfd::solve::spectral::phase::PhaseModel;
-use mfd::solve::spectral::{flat_plate_prior, SpectralConfig, SpectralMaps, SpectralSolver};
+use mfd::solve::spectral::{nominal_plate_prior, SpectralConfig, SpectralMaps, SpectralSolver};
 
 /// The schedule: τ = 1, 4, 16, 64 (periods differing by multiples
 /// of 3) × four π/2 steps, along ±45°.
@@ -66,7 +66,7 @@ fn solve(
         ..SpectralConfig::default()
     };
     let frames = FrameInfo::from_patterns(patterns);
-    let prior = flat_plate_prior(prior_station, config.edge_margin_mm).unwrap();
+    let prior = nominal_plate_prior(prior_station, config.edge_margin_mm).unwrap();
     let mut solver = SpectralSolver::with_prior(station, &frames, config, prior).unwrap();
     let mut buf = vec![0u16; station.camera.pixel_count()];
     for (k, p) in patterns.iter().enumerate() {

@@ -307,7 +307,7 @@ fn a_prior_handed_in_is_the_one_new_traces() {
     let frames = FrameInfo::from_patterns(&schedule.patterns());
     let cfg = SpectralConfig::default();
     let own = SpectralSolver::new(&st, &frames, cfg.clone()).unwrap();
-    let prior = mfd::solve::spectral::flat_plate_prior(&st, cfg.edge_margin_mm).unwrap();
+    let prior = mfd::solve::spectral::nominal_plate_prior(&st, cfg.edge_margin_mm).unwrap();
     let given = SpectralSolver::with_prior(&st, &frames, cfg.clone(), prior.clone()).unwrap();
     assert_eq!(own.candidate_pixels(), given.candidate_pixels());
     assert_eq!(own.series_bytes(), given.series_bytes());

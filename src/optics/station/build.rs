@@ -248,6 +248,7 @@ impl SymmetricLayout {
             aperture_radius_mm: 25.5,
             aperture_center_mm: Point2::origin(),
             pose: super::Pose::default(),
+            wedge: super::Wedge::NONE,
         }
     }
 

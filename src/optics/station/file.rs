@@ -141,4 +141,11 @@ pub struct ElementFile {
         skip_serializing_if = "Option::is_none"
     )]
     pub tilt_deg: Option<[f64; 2]>,
+    /// The nominal wedge between the faces, arcmin (version 2; default 0, at most 120).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wedge_arcmin: Option<f64>,
+    /// The direction in the element's frame along which the plate thins,
+    /// degrees (version 2; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wedge_azimuth_deg: Option<f64>,
 }

@@ -15,6 +15,7 @@ mod file;
 mod pose;
 mod uncertainty;
 mod validate;
+mod wedge;
 
 use std::path::{Path, PathBuf};
 
@@ -30,6 +31,7 @@ pub use file::{
 };
 pub use pose::Pose;
 pub use uncertainty::{StationUncertainty, UncertaintyError, UNCERTAINTY_FORMAT};
+pub use wedge::{Wedge, MAX_WEDGE_ARCMIN};
 
 /// What went wrong reading or checking a station.
 #[derive(Debug, thiserror::Error)]
@@ -247,12 +249,53 @@ pub struct Element {
     pub aperture_center_mm: Point2<f64>,
     /// Where the element's own frame sits (station v2); identity: on the reference plane.
     pub pose: Pose,
+    /// The wedge the plate was made with (station v2); none: parallel faces.
+    pub wedge: Wedge,
 }
 
 impl Element {
     /// The pose's pivot `c = (aperture_center_mm, 0)`.
     pub fn pivot(&self) -> Point3<f64> {
         Point3::new(self.aperture_center_mm.x, self.aperture_center_mm.y, 0.0)
+    }
+
+    /// The aperture centre `[x, y]`, mm: the Zernike centre of both faces.
+    pub fn centre(&self) -> [f64; 2] {
+        [self.aperture_center_mm.x, self.aperture_center_mm.y]
+    }
+
+    /// The nominal front and back with `terms` Noll terms each on the
+    /// aperture: a flat front and the wedge's plane as the back (flat for a
+    /// parallel plate). Every stage that starts from the plate as made
+    /// starts here.
+    ///
+    /// # Errors
+    /// [`crate::optics::zernike::ZernikeError`] for an aperture that makes
+    /// no basis.
+    pub fn nominal_surfaces(
+        &self,
+        terms: usize,
+    ) -> Result<
+        (
+            crate::optics::zernike::ZernikeSurface,
+            crate::optics::zernike::ZernikeSurface,
+        ),
+        crate::optics::zernike::ZernikeError,
+    > {
+        use crate::optics::zernike::{ZernikeBasis, ZernikeSurface};
+        let terms = if self.wedge.is_none() {
+            terms.max(1)
+        } else {
+            terms.max(3)
+        };
+        let basis = ZernikeBasis::new(terms, self.aperture_radius_mm, self.centre())?;
+        let back = self
+            .wedge
+            .back_coefficients_nm(terms, self.aperture_radius_mm);
+        Ok((
+            ZernikeSurface::new(basis.clone(), vec![0.0; terms])?,
+            ZernikeSurface::new(basis, back)?,
+        ))
     }
 }
 
@@ -335,6 +378,7 @@ impl Station {
         self.camera.distortion.is_some()
             || self.screen.cover_glass.is_some()
             || !self.element.pose.is_identity()
+            || !self.element.wedge.is_none()
     }
 
     /// Validates the on-disk form.
@@ -392,6 +436,9 @@ impl Station {
                 ]),
                 offset_mm: (!pose.is_identity()).then(|| pose.offset_mm.into()),
                 tilt_deg: (!pose.is_identity()).then_some(pose.tilt_deg),
+                wedge_arcmin: (!self.element.wedge.is_none()).then_some(self.element.wedge.arcmin),
+                wedge_azimuth_deg: (!self.element.wedge.is_none())
+                    .then_some(self.element.wedge.azimuth_deg),
             },
         }
     }

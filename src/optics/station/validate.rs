@@ -7,8 +7,8 @@ use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 
 use super::file::BROWN_CONRADY;
 use super::{
-    Camera, CoverGlass, Distortion, Element, Pose, Screen, Station, StationError, StationFile,
-    STATION_FORMAT, STATION_FORMAT_V2,
+    Camera, CoverGlass, Distortion, Element, ElementFile, Pose, Screen, Station, StationError,
+    StationFile, Wedge, MAX_WEDGE_ARCMIN, STATION_FORMAT, STATION_FORMAT_V2,
 };
 
 /// Tolerance on orthonormality of the rotation and of the screen axes.
@@ -173,6 +173,11 @@ fn version_1_only(check: &Check, file: &StationFile) -> Result<(), StationError>
         ("screen.cover_glass", file.screen.cover_glass.is_some()),
         ("element.offset_mm", file.element.offset_mm.is_some()),
         ("element.tilt_deg", file.element.tilt_deg.is_some()),
+        ("element.wedge_arcmin", file.element.wedge_arcmin.is_some()),
+        (
+            "element.wedge_azimuth_deg",
+            file.element.wedge_azimuth_deg.is_some(),
+        ),
     ];
     match used.iter().find(|(_, u)| *u) {
         Some((field, _)) => check.fail(
@@ -388,6 +393,7 @@ fn element(check: &Check, file: &StationFile) -> Result<Element, StationError> {
             format!("expected tilts within ±90° (degrees, not radians?), found {t}"),
         );
     }
+    let wedge = wedge(check, e)?;
     Ok(Element {
         refractive_index: e.refractive_index,
         thickness_mm: e.thickness_mm,
@@ -397,6 +403,27 @@ fn element(check: &Check, file: &StationFile) -> Result<Element, StationError> {
             offset_mm: Vector3::from(offset),
             tilt_deg: tilt,
         },
+        wedge,
+    })
+}
+
+/// `wedge_arcmin` in `[0, 120]` (the spec's limit), `wedge_azimuth_deg` finite.
+fn wedge(check: &Check, e: &ElementFile) -> Result<Wedge, StationError> {
+    let arcmin = e.wedge_arcmin.unwrap_or(0.0);
+    let azimuth_deg = e.wedge_azimuth_deg.unwrap_or(0.0);
+    if !(arcmin.is_finite() && (0.0..=MAX_WEDGE_ARCMIN).contains(&arcmin)) {
+        return check.fail(
+            "element.wedge_arcmin",
+            format!(
+                "expected a wedge of 0 to {MAX_WEDGE_ARCMIN} arcmin (minutes of arc, not \
+                 degrees or radians; its direction is wedge_azimuth_deg), found {arcmin}"
+            ),
+        );
+    }
+    check.finite("element.wedge_azimuth_deg", &[azimuth_deg])?;
+    Ok(Wedge {
+        arcmin,
+        azimuth_deg,
     })
 }
 

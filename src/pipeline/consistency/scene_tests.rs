@@ -1,10 +1,10 @@
 //! Case 6 of issue 19 on maps built from the independent fixture's
-//! station: every pixel measured at its flat-plate prediction with
+//! station: every pixel measured at its nominal-plate prediction with
 //! noise, then some pixels given an alias (30–100 px off) or a residual
 //! 25× the noise. Before this pass both were reported as found.
 
 use super::*;
-use crate::solve::spectral::{flat_plate_prior, PixelResult};
+use crate::solve::spectral::{nominal_plate_prior, PixelResult};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
@@ -27,7 +27,7 @@ fn scene() -> (Station, TracedView, SpectralMaps) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/public-small/station.toml");
     let station = Station::load(&path).unwrap();
-    let prior = flat_plate_prior(&station, 0.0).unwrap();
+    let prior = nominal_plate_prior(&station, 0.0).unwrap();
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(19);
     let sigma = 0.25;
     let pixels = prior

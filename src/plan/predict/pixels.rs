@@ -5,23 +5,20 @@
 use crate::budget::scene;
 use crate::optics::station::Station;
 use crate::optics::trace::{Miss, Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
-use crate::optics::zernike::ZernikeSurface;
 use crate::solve::spectral::model::Design;
 
 use super::super::stage::{self, StageCheck};
 use super::super::{PlanError, PlanOptions};
 use super::STAGE_SEED;
 
-/// The traced flat plate with the back's weight scaled (0: the back path
+/// The traced nominal plate (flat, or wedged as declared) with the back's weight scaled (0: the back path
 /// removed, an AR-coated back).
 pub fn traced_view(station: &Station, back_scale: f64) -> Result<TracedView, PlanError> {
-    let e = &station.element;
-    let flat = ZernikeSurface::flat(
-        e.aperture_radius_mm,
-        [e.aperture_center_mm.x, e.aperture_center_mm.y],
-    )
-    .map_err(scene::BudgetError::from)?;
-    let plate = Plate::new(station, flat.clone(), flat, DEFAULT_EDGE_MARGIN_MM);
+    let (front, back) = station
+        .element
+        .nominal_surfaces(1)
+        .map_err(scene::BudgetError::from)?;
+    let plate = Plate::new(station, front, back, DEFAULT_EDGE_MARGIN_MM);
     let mut view = TracedView::trace(station, &plate);
     for p in &mut view.pixels {
         if back_scale == 0.0 {

@@ -76,7 +76,7 @@ impl<'a> FitBatch<'a> {
         self.plans
     }
 
-    /// The flat-plate prediction of every camera pixel.
+    /// The nominal-plate prediction of every camera pixel.
     pub fn prior(&self) -> &'a TracedView {
         &self.prior.view
     }

@@ -24,6 +24,25 @@ pub enum SpectralError {
         #[source]
         source: crate::optics::zernike::ZernikeError,
     },
+    /// The declared wedge sends the back reflection off the screen (or out
+    /// through the rim) on most of the element: the station cannot show it.
+    #[error(
+        "element.wedge_arcmin = {arcmin} (azimuth {azimuth_deg}°): the back reflection of \
+         the wedged plate reaches the screen on {seen} camera pixels, against {parallel} \
+         for parallel faces; this station cannot show that wedge's back face (a larger \
+         screen, a screen closer to the element, or the element turned so that the back \
+         reflection comes back onto the screen)"
+    )]
+    WedgeOffScreen {
+        /// The declared wedge, arcmin.
+        arcmin: f64,
+        /// Its azimuth, degrees.
+        azimuth_deg: f64,
+        /// Pixels whose back path reaches the screen on the wedged plate.
+        seen: usize,
+        /// The same for parallel faces.
+        parallel: usize,
+    },
     /// A setting is out of range.
     #[error("spectral setting {field}: {problem}")]
     Config {
@@ -57,7 +76,7 @@ pub enum SpectralError {
     #[error(
         "geometry prior: {width}x{height} pixels ({pixels} traced) for a \
          {camera_width}x{camera_height} camera; trace it through this station \
-         (spectral::flat_plate_prior)"
+         (spectral::nominal_plate_prior)"
     )]
     Prior {
         /// Pixels traced in the prior.
@@ -86,6 +105,7 @@ impl crate::outcome::Classify for SpectralError {
             // The element's aperture is the station file's; a frame out
             // of order, missing or of another size is the acquisition's.
             | SpectralError::Aperture { .. }
+            | SpectralError::WedgeOffScreen { .. }
             | SpectralError::Frame { .. } => Some(Outcome::Input),
             SpectralError::Npy(e) => e.outcome(),
             // The backend or the prior disagreeing with the solver is a bug.

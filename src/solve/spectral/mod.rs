@@ -41,13 +41,14 @@ mod prior;
 mod scene;
 pub mod statistics;
 mod stream;
+pub mod wedge;
 
 pub use batch::{CpuFits, FitBackend, FitBatch};
 pub use config::{Engine, SpectralConfig, SpectralError, SERIES_LIMIT_BYTES};
 pub use feed::FeedError;
 pub use maps::SpectralMaps;
 pub(crate) use prior::candidates as prior_candidates;
-pub use prior::flat_plate_prior;
+pub use prior::nominal_plate_prior;
 pub use statistics::StatisticsError;
 pub use stream::{design, SpectralSolver};
 

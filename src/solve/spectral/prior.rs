@@ -1,4 +1,4 @@
-//! The geometry prior: a flat plate traced through the nominal station
+//! The geometry prior: the nominal plate (flat, or wedged as declared) traced through the nominal station
 //! (a [`TracedView`] built by the trace module and handed in), and what the
 //! solver takes from it — the pixels worth fitting, the back-minus-front
 //! offsets borrowed at the rim, and the statistics' band centres.
@@ -8,34 +8,59 @@ use super::periodogram::SpectrumPlans;
 use super::{SpectralConfig, SpectralError};
 use crate::optics::station::Station;
 use crate::optics::trace::{Plate, TracedView};
-use crate::optics::zernike::ZernikeSurface;
 
-/// The flat plate (both surfaces flat over the element's aperture) traced
-/// through `station`, with a rim of `edge_margin_mm` beyond the aperture:
+/// The nominal plate (a flat front; the back flat, or the plane of the
+/// wedge the station declares) traced through `station`, with a rim of `edge_margin_mm` beyond the aperture:
 /// the prior [`super::SpectralSolver::new`] uses, for callers that prepare
 /// it themselves ([`super::SpectralSolver::with_prior`]).
 ///
 /// # Errors
 /// [`SpectralError::Schedule`] when the element's aperture does not make a
 /// flat surface.
-pub fn flat_plate_prior(
+pub fn nominal_plate_prior(
     station: &Station,
     edge_margin_mm: f64,
 ) -> Result<TracedView, SpectralError> {
-    let e = &station.element;
-    let flat = ZernikeSurface::flat(
-        e.aperture_radius_mm,
-        [e.aperture_center_mm.x, e.aperture_center_mm.y],
-    )
-    .map_err(|source| SpectralError::Aperture { source })?;
-    let plate = Plate::new(station, flat.clone(), flat, edge_margin_mm);
-    Ok(TracedView::trace(station, &plate))
+    let (front, back) = station
+        .element
+        .nominal_surfaces(1)
+        .map_err(|source| SpectralError::Aperture { source })?;
+    let plate = Plate::new(station, front.clone(), back, edge_margin_mm);
+    let view = TracedView::trace(station, &plate);
+    let wedge = station.element.wedge;
+    if !wedge.is_none() {
+        let parallel = TracedView::trace(
+            station,
+            &Plate::new(station, front.clone(), front, edge_margin_mm),
+        );
+        let (seen, parallel) = (backs(&view), backs(&parallel));
+        // A quarter of the parallel plate's back pixels: below it the back
+        // face would be reported from a sliver of its aperture, if at all.
+        if seen * WEDGE_VISIBLE_SHARE < parallel {
+            return Err(SpectralError::WedgeOffScreen {
+                arcmin: wedge.arcmin,
+                azimuth_deg: wedge.azimuth_deg,
+                seen,
+                parallel,
+            });
+        }
+    }
+    Ok(view)
+}
+
+/// The wedged plate's back pixels must be at least 1 / this of the
+/// parallel plate's.
+const WEDGE_VISIBLE_SHARE: usize = 4;
+
+/// Camera pixels whose back path reaches the screen.
+fn backs(view: &TracedView) -> usize {
+    view.pixels.iter().filter(|p| p.back.is_ok()).count()
 }
 
 /// The prior with the solver's view of it: the candidate pixels and, per
 /// candidate, the back-minus-front offset borrowed at the rim.
 pub(super) struct GeometryPrior {
-    /// The flat-plate prediction of every camera pixel.
+    /// The nominal-plate prediction of every camera pixel.
     pub(super) view: TracedView,
     /// Camera pixel index of each candidate, row-major.
     pub(super) candidates: Vec<u32>,

@@ -203,21 +203,17 @@ pub fn reconstruct(
 }
 
 /// The first stage: the front from the S1 slopes with the starting term
-/// count, on a plate whose back is flat. Returns the term count, the plate
+/// count, on the nominal plate (its back flat, or the declared wedge's plane). Returns the term count, the plate
 /// and the stage's record.
 fn front_stage(
     obs: &Observations,
     station: &Station,
     opts: &SurfaceOptions,
 ) -> Result<(usize, Plate, Vec<Stage>), SurfaceError> {
-    let e = &station.element;
-    let (radius, centre) = (
-        e.aperture_radius_mm,
-        [e.aperture_center_mm.x, e.aperture_center_mm.y],
-    );
     let terms = opts.terms.unwrap_or(opts.max_terms).max(3);
-    let flat = ZernikeSurface::new(ZernikeBasis::new(terms, radius, centre)?, vec![0.0; terms])?;
-    let mut plate = Plate::new(station, flat.clone(), flat, opts.edge_margin_mm);
+    // The plate as made: a flat front and the declared wedge's back plane.
+    let (front, back) = station.element.nominal_surfaces(terms)?;
+    let mut plate = Plate::new(station, front, back, opts.edge_margin_mm);
     let mut stages = Vec::new();
 
     let t = Instant::now();

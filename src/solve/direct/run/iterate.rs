@@ -10,7 +10,6 @@ use super::third::{add_third_uncertainty, third_step, THIRD_ROUNDS};
 use super::{DirectError, DirectOptions, Fitted, Iteration, ThirdReflection};
 use crate::optics::station::Station;
 use crate::optics::trace::Plate;
-use crate::optics::zernike::{ZernikeBasis, ZernikeSurface};
 use crate::solve::spectral::{SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::{
     reconstruct, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
@@ -254,7 +253,8 @@ impl State {
     }
 }
 
-/// The start: the per-pixel surfaces, or flat ones with the starting term
+/// The start: the per-pixel surfaces, or the nominal plate (a flat front,
+/// the back flat or the declared wedge's plane) with the starting term
 /// count of the surface solver.
 fn start_plate(
     station: &Station,
@@ -270,14 +270,9 @@ fn start_plate(
             margin,
         ));
     }
-    let e = &station.element;
     let terms = surface.terms.unwrap_or(surface.max_terms).max(3);
-    let centre = [e.aperture_center_mm.x, e.aperture_center_mm.y];
-    let flat = ZernikeSurface::new(
-        ZernikeBasis::new(terms, e.aperture_radius_mm, centre)?,
-        vec![0.0; terms],
-    )?;
-    Ok(Plate::new(station, flat.clone(), flat, margin))
+    let (front, back) = station.element.nominal_surfaces(terms)?;
+    Ok(Plate::new(station, front, back, margin))
 }
 
 /// What the pixels' model holds besides the surfaces: whether clipped

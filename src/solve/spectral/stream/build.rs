@@ -10,13 +10,13 @@ use crate::optics::trace::TracedView;
 use crate::solve::spectral::model::{Axis, Design, FrameMeta};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 use crate::solve::spectral::phase::{PhaseSchedule, Response};
-use crate::solve::spectral::prior::{flat_plate_prior, GeometryPrior};
+use crate::solve::spectral::prior::{nominal_plate_prior, GeometryPrior};
 use crate::solve::spectral::statistics::{Statistics, STATS_BLOCK};
 use crate::solve::spectral::{Engine, SpectralConfig, SpectralError, SERIES_LIMIT_BYTES};
 
 impl SpectralSolver {
-    /// Prepares for `frames` (capture order) of `station`, with the flat
-    /// plate traced through it as the prior ([`flat_plate_prior`], the rim
+    /// Prepares for `frames` (capture order) of `station`, with the nominal
+    /// plate traced through it as the prior ([`nominal_plate_prior`], the rim
     /// `config.edge_margin_mm`).
     ///
     /// # Errors
@@ -28,12 +28,12 @@ impl SpectralSolver {
         config: SpectralConfig,
     ) -> Result<Self, SpectralError> {
         let design = design(station, frames)?;
-        let prior = flat_plate_prior(station, config.edge_margin_mm)?;
+        let prior = nominal_plate_prior(station, config.edge_margin_mm)?;
         Self::with_design(station, design, config, prior)
     }
 
     /// Prepares for `frames` (capture order) of `station` with `prior`, the
-    /// nominal flat plate traced through the station ([`flat_plate_prior`]
+    /// nominal plate (flat, or wedged as declared) traced through the station ([`nominal_plate_prior`]
     /// or [`TracedView::trace`]), one path set per camera pixel.
     ///
     /// # Errors
