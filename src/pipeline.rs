@@ -173,10 +173,16 @@ pub fn reconstruct(
             // The wedge the frames show, where the station's was not it.
             frame_station = used;
             owned = solver;
-            (First::Spectral(stage), Some(&owned))
+            (First::Spectral(Box::new(stage)), Some(&owned))
         }
         Input::Streamed(solver) => (
-            First::Spectral(spectral_stage(solver, &frame_station, options, 0.0, None)?),
+            First::Spectral(Box::new(spectral_stage(
+                solver,
+                &frame_station,
+                options,
+                0.0,
+                None,
+            )?)),
             Some(&*solver),
         ),
         Input::ScreenPoints(points) => (First::Points(points), None),
@@ -190,7 +196,7 @@ pub fn reconstruct(
         stage.summary.consistency = Some(s.consistency.clone());
     }
     let spectral = match first {
-        First::Spectral(s) => Some(s),
+        First::Spectral(s) => Some(*s),
         First::Points(_) => None,
     };
     Ok(Reconstruction {
@@ -238,7 +244,8 @@ fn read_acquisition(
 
 /// Where the surface stage's screen points come from.
 enum First {
-    Spectral(SpectralStage),
+    // Boxed: the stage (maps' handles, the wedge check) dwarfs the points' handle.
+    Spectral(Box<SpectralStage>),
     Points(ScreenPoints),
 }
 

@@ -217,6 +217,10 @@ fn mu_grid(design: &Design) -> Grid {
     Grid { step, bins }
 }
 
+/// Per sample pixel: its back point's linear model and its front point
+/// (`None` for a pixel without both paths).
+type Linearised = Vec<Option<(Lin, [f64; 2])>>;
+
 /// Each sample pixel traced at slope `at` and at two slopes beside it: its
 /// back point's linear model and its front point; `None` for a pixel
 /// without both paths. `None` overall when the plate makes no surface.
@@ -225,7 +229,7 @@ fn linearised(
     series: &[(usize, Vec<f64>)],
     at: [f64; 2],
     edge_margin_mm: f64,
-) -> Option<Vec<Option<(Lin, [f64; 2])>>> {
+) -> Option<Linearised> {
     let plates = [[0.0, 0.0], [SLOPE_STEP, 0.0], [0.0, SLOPE_STEP]].map(|ds| {
         let mut s = station.clone();
         s.element.wedge = Wedge::from_slope([at[0] + ds[0], at[1] + ds[1]]);
@@ -479,7 +483,7 @@ fn moved(l: &Lin, ds: [f64; 2]) -> (f64, f64) {
 
 /// Linear interpolation of `p` at the fractional index `x` (1 outside).
 fn lookup(p: &[f64], x: f64) -> f64 {
-    if !(x >= 0.0) || x >= (p.len() - 1) as f64 {
+    if x.is_nan() || x < 0.0 || x >= (p.len() - 1) as f64 {
         return 1.0;
     }
     let i = x as usize;
