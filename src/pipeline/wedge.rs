@@ -139,6 +139,17 @@ pub fn check_wedge(
     let Some(search) = search_wedge(station, &design, &series, config.edge_margin_mm) else {
         return Ok((station.clone(), None));
     };
+    if search.front_seen_share < FOUND_SHARE {
+        // The front is not where the station puts it: a wrong station or
+        // manifest (the station check says which), not a wedge.
+        log::info!(
+            "wedge search: the front reflection stands where the station puts it on only \
+             {:.0} % of {} sample pixels; no wedge is judged, the station's is the start",
+            100.0 * search.front_seen_share,
+            search.pixels
+        );
+        return Ok((station.clone(), None));
+    }
     let moved = search.shift_bins >= SHIFT_BINS;
     let use_found =
         moved && search.seen_share >= FOUND_SHARE && search.seen_share > search.declared_seen_share;

@@ -64,6 +64,11 @@ pub struct WedgeSearch {
     pub seen_share: f64,
     /// The same share at the back point of the station's declared wedge.
     pub declared_seen_share: f64,
+    /// The share of sample pixels whose front peak stands where the station
+    /// puts it (within the masked lobe, every direction): where it does not,
+    /// the station or the manifest is off, and the back says nothing of the
+    /// wedge.
+    pub front_seen_share: f64,
     /// Median over the sample pixels of the back point's move from the
     /// declared wedge's to the found one's, in Fourier bins (the largest
     /// over the directions).
@@ -81,6 +86,9 @@ struct Sample {
     least: Vec<f64>,
     /// Per direction: the front's fringe coordinate μ (the mask's centre).
     front_mu: Vec<f64>,
+    /// Whether the front's peak stands within the mask of its prediction
+    /// in every direction.
+    front_seen: bool,
 }
 
 /// One sample pixel's back point at a slope, and its Jacobian per unit slope.
@@ -124,17 +132,20 @@ pub fn search_wedge(
             let mut power = Vec::new();
             let mut least = Vec::new();
             let mut front_mu = Vec::new();
+            let mut front_seen = true;
             for d in 0..design.axes.len() {
                 let predicted = design.axes[d].s(front[0], front[1]);
                 let (p, peak, mu) = periodogram(design, y, d, &grid, predicted);
                 power.push(p);
                 least.push((peak * lin.ratio2 / BACK_POWER_SLACK).max(SEEN_RATIO));
+                front_seen &= peak >= SEEN_RATIO;
                 front_mu.push(mu);
             }
             Some(Sample {
                 power,
                 least,
                 front_mu,
+                front_seen,
             })
         })
         .collect();
@@ -171,6 +182,8 @@ pub fn search_wedge(
     );
     let lin_found = strip(linearised(station, series, fine, edge_margin_mm)?);
     let seen_share = seen(design, &samples, &lin_found, None, &grid);
+    let with_front = samples.iter().flatten().filter(|s| s.front_seen).count();
+    let front_seen_share = with_front as f64 / samples.iter().flatten().count().max(1) as f64;
     let declared_seen_share = seen(design, &samples, &lin0, Some(&lin_found), &grid);
     let mut shifts: Vec<f64> = lin_found
         .iter()
@@ -197,6 +210,7 @@ pub fn search_wedge(
         pixels: lin_found.iter().filter(|l| l.is_some()).count(),
         seen_share,
         declared_seen_share,
+        front_seen_share,
         shift_bins: shifts[shifts.len() / 2],
     })
 }
