@@ -8,11 +8,12 @@ use std::path::Path;
 use mfd::optics::station::{CameraProfile, DisplayProfile, Station, SymmetricLayout};
 use proptest::prelude::*;
 
-fn paper_text() -> String {
+pub(crate) fn paper_text() -> String {
     std::fs::read_to_string(common::repo("calib/paper-sim.toml")).unwrap()
 }
 
-fn rejects(text: &str, field: &str) {
+/// Asserts that `text` is refused with an error naming the file and `field`.
+pub(crate) fn rejects(text: &str, field: &str) {
     let err = Station::from_toml_str(text, Path::new("bad.toml"))
         .unwrap_err()
         .to_string();

@@ -4,6 +4,7 @@
 //! an undeclared wedge ([`chain`]).
 
 use crate::common;
+use crate::station_files::{paper_text, rejects};
 
 use std::path::Path;
 
@@ -14,10 +15,6 @@ use nalgebra::{Point3, Unit, Vector3};
 mod chain;
 mod soak;
 
-fn paper_text() -> String {
-    std::fs::read_to_string(common::repo("calib/paper-sim.toml")).unwrap()
-}
-
 fn v2_with(element_lines: &str) -> String {
     paper_text()
         .replace("format = \"mfd-station/1\"", "format = \"mfd-station/2\"")
@@ -25,17 +22,6 @@ fn v2_with(element_lines: &str) -> String {
             "aperture_center_mm = [0.0, 0.0]",
             &format!("aperture_center_mm = [0.0, 0.0]\n{element_lines}"),
         )
-}
-
-fn rejects(text: &str, field: &str) {
-    let err = Station::from_toml_str(text, Path::new("bad.toml"))
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("bad.toml"),
-        "error does not name the file: {err}"
-    );
-    assert!(err.contains(field), "error does not name `{field}`: {err}");
 }
 
 #[test]
