@@ -30,7 +30,10 @@ Exit status:
   4    no signal: the data hold nothing to measure (too few points for the
        surfaces)
   5    inconsistent: the result contradicts the station (written whole and
-       flagged in consistency.json; --accept-inconsistent exits 0)
+       flagged in consistency.json; --accept-inconsistent exits 0), or a
+       surface stage stopped at its iteration limit with a last step
+       larger than its σ (flagged in summary.json's convergence;
+       --accept-unconverged exits 0)
   6    device: the camera or display failed (disconnect, no usable frame)
   130  interrupted (Ctrl-C): what was recorded is kept; `--resume` continues";
 

@@ -18,6 +18,7 @@ use crate::budget::Budget;
 use crate::optics::station::{Dof, Station, StationUncertainty};
 use crate::report::summary::Summary;
 use crate::solve::spectral::{FeedError, SpectralConfig, SpectralMaps, SpectralSolver};
+use crate::solve::surfaces::convergence::Convergence;
 use crate::solve::surfaces::{
     reconstruct as solve_surfaces, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
     Uncertainty,
@@ -194,6 +195,10 @@ pub fn reconstruct(
         .map(|opts| surface_stage(&first, solver, station, opts, options));
     if let (Some(Ok(stage)), First::Spectral(s)) = (&mut surfaces, &first) {
         stage.summary.consistency = Some(s.consistency.clone());
+        stage
+            .summary
+            .convergence
+            .insert(0, spectral_convergence(&s.maps));
     }
     let spectral = match first {
         First::Spectral(s) => Some(*s),
@@ -204,6 +209,37 @@ pub fn reconstruct(
         surfaces,
         inputs: None,
     })
+}
+
+/// The spectral stage's per-pixel fits in `summary.json`'s `convergence`:
+/// how many stopped at their iteration limit (flagged `NOT_CONVERGED` in
+/// `flags.npy`). Each such pixel's point carries its own σ and faces the
+/// surface fit's outlier rule, so they are counted and said, not a flag on
+/// the result.
+fn spectral_convergence(maps: &crate::solve::spectral::SpectralMaps) -> Convergence {
+    use crate::solve::spectral::PixelFlags;
+    let n = maps
+        .pixels
+        .iter()
+        .filter(|p| {
+            p.flags.intersects(PixelFlags::NOT_CONVERGED)
+                && !p.flags.intersects(PixelFlags::NO_DATA)
+        })
+        .count();
+    let mut c = Convergence::new(
+        "spectral per-pixel fits",
+        if n == 0 {
+            "every pixel's own stopping rule".into()
+        } else {
+            "iteration limit (or a singular step)".into()
+        },
+        n == 0,
+        None,
+        false,
+    );
+    c.pixels = Some(n);
+    c.flags_result = false;
+    c
 }
 
 /// Reads every frame of `acq` into a new spectral solver, calling

@@ -142,10 +142,17 @@ pub fn linearise(
     let p = layout.columns();
     // The whitened residual rides along as the last column.
     let n = p + DOFS + 1;
-    let (gram, n_resid, failed) = pixels.par_chunks(128).map(|chunk| rows.gram(chunk)).reduce(
-        || (DMatrix::zeros(n, n), 0, [0; 2]),
-        |(g, r, f), (h, s, e)| (g + h, r + s, [f[0] + e[0], f[1] + e[1]]),
-    );
+    // Every parallel sum here is collected in chunk order and added in it:
+    // the same inputs give the same budget bit for bit.
+    let grams: Vec<_> = pixels
+        .par_chunks(128)
+        .map(|chunk| rows.gram(chunk))
+        .collect();
+    let (gram, n_resid, failed) = grams
+        .into_iter()
+        .fold((DMatrix::zeros(n, n), 0, [0; 2]), |(g, r, f), (h, s, e)| {
+            (g + h, r + s, [f[0] + e[0], f[1] + e[1]])
+        });
     let a = gram.view((0, 0), (p, p)).into_owned();
     let b = gram.view((0, p), (p, DOFS)).into_owned();
     let c = gram.view((p, p), (DOFS, DOFS)).into_owned();
@@ -155,19 +162,18 @@ pub fn linearise(
         condition_number: f64::INFINITY,
     })?;
     let s = chol.solve(&b);
-    let (g, h, xr) = pixels
+    let projected: Vec<_> = pixels
         .par_chunks(128)
         .map(|chunk| rows.projected(chunk, &s))
-        .reduce(
-            || {
-                (
-                    DMatrix::zeros(DOFS, DOFS),
-                    DMatrix::zeros(p, DOFS),
-                    DVector::zeros(DOFS),
-                )
-            },
-            |(g, h, x), (g2, h2, x2)| (g + g2, h + h2, x + x2),
-        );
+        .collect();
+    let (g, h, xr) = projected.into_iter().fold(
+        (
+            DMatrix::zeros(DOFS, DOFS),
+            DMatrix::zeros(p, DOFS),
+            DVector::zeros(DOFS),
+        ),
+        |(g, h, x), (g2, h2, x2)| (g + g2, h + h2, x + x2),
+    );
     let ah = chol.solve(&h);
     let schur = &g - h.transpose() * &ah;
     let schur = (&schur + schur.transpose()) * 0.5;

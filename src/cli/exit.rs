@@ -17,7 +17,8 @@ pub enum Class {
     /// station puts the element, too few points for the surfaces).
     NoSignal,
     /// The result contradicts the station (flagged, `--accept-inconsistent`
-    /// to exit 0 anyway).
+    /// to exit 0 anyway), or a surface stage stopped at its iteration limit
+    /// short of its σ (flagged, `--accept-unconverged`).
     Inconsistent,
     /// Camera or display failure.
     Device,

@@ -122,6 +122,11 @@ pub struct CheckArgs {
     /// result is still flagged in consistency.json and summary.json).
     #[arg(long)]
     pub accept_inconsistent: bool,
+    /// Exit 0 even when a stage of the surface solvers stopped at its
+    /// iteration limit with a last step larger than its σ (the result is
+    /// still flagged in summary.json's "convergence").
+    #[arg(long)]
+    pub accept_unconverged: bool,
 }
 
 impl CheckArgs {

@@ -62,6 +62,20 @@ pub fn write_and_print(
     } else if rec.spectral.is_some() {
         println!("wrote {}", out.join("screen_coords.npy").display());
     }
+    if let Some(Ok(stage)) = &rec.surfaces {
+        if stage.summary.unconverged() && !checks.accept_unconverged {
+            return Err(classified(
+                Class::Inconsistent,
+                anyhow::anyhow!(
+                    "a stage stopped at its iteration limit with a last step larger than its σ \
+                     (above); the result in {} is complete but flagged (summary.json \
+                     \"convergence\"); rerun with a larger --max-iter, fewer --terms, or \
+                     --accept-unconverged to exit 0",
+                    out.display()
+                ),
+            ));
+        }
+    }
     match rec.spectral.as_ref().map(|s| &s.consistency) {
         Some(c) if !c.consistent && !checks.accept_inconsistent => Err(classified(
             Class::Inconsistent,
@@ -254,6 +268,13 @@ fn print_surfaces(stage: &SurfaceStage) {
         sol.reduced_chi2,
         sol.condition_number
     );
+    for c in summary.convergence.iter().filter(|c| !c.converged) {
+        let line = c.describe();
+        println!("{line}");
+        if c.flags_result {
+            eprintln!("warning: {line}");
+        }
+    }
     if !sol.rejected.is_empty() {
         println!(
             "  {} pixels left out as outliers (χ² > 49), e.g. (column, row) {:?}",

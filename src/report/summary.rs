@@ -12,9 +12,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::budget::refine::Refined;
 
+use crate::solve::surfaces::convergence::{self, Convergence};
 use crate::solve::surfaces::report::{figures, SurfaceFigures, FIGURES_NOTE};
 use crate::solve::surfaces::select::{TermChoice, CRITERION};
-use crate::solve::surfaces::solve::{Stage, OUTLIER_RULE};
+use crate::solve::surfaces::solve::{Stage, TermChoices, OUTLIER_RULE};
 use crate::solve::surfaces::{Observations, SurfaceSolution};
 
 mod station_part;
@@ -48,6 +49,12 @@ pub struct Summary {
     pub terms: Terms,
     /// Every stage that ran, in order.
     pub stages: Vec<StageSummary>,
+    /// How every stage ended: converged, or stopped by its iteration limit
+    /// with its last step against its σ, and whether that flags the result
+    /// (`mfd` then exits 5 unless `--accept-unconverged`); absent in
+    /// summaries written before it.
+    #[serde(default)]
+    pub convergence: Vec<Convergence>,
     /// Final χ² of the joint fit.
     pub chi2: f64,
     /// Residual components of the final fit.
@@ -278,8 +285,9 @@ impl Summary {
             figures_note: FIGURES_NOTE.into(),
             front: figures(sol, false),
             back: sol.back_fitted.then(|| figures(sol, true)),
-            terms: terms(sol.choice.as_ref()),
+            terms: terms(sol.choice.as_ref(), sol.terms_fixed),
             stages: sol.stages.iter().map(stage).collect(),
+            convergence: convergence::of_stages(&sol.stages),
             chi2: sol.chi2,
             residuals: sol.n_resid,
             reduced_chi2: sol.reduced_chi2,
@@ -301,6 +309,7 @@ impl Summary {
     /// The summary of a solution the surface-domain fit made.
     pub fn with_direct(mut self, d: &crate::solve::direct::DirectReport) -> Summary {
         self.estimator = "surface-domain".into();
+        self.convergence.push(direct_convergence(d));
         self.direct = Some(DirectSummary {
             note: DIRECT_NOTE.into(),
             converged: d.converged,
@@ -349,25 +358,62 @@ impl Summary {
             None => (&noise.std_nm[..], noise.error_rms_nm),
         })
     }
+
+    /// Whether a stage's ending flags the result ([`Convergence::flags_result`]).
+    pub fn unconverged(&self) -> bool {
+        convergence::flagged(&self.convergence)
+    }
 }
 
-fn terms(choice: Option<&[TermChoice; 2]>) -> Terms {
+/// What the summary says when the caller did not fix the count but the
+/// criterion could not be evaluated (the normal equations at the fit not
+/// positive definite): every surface kept the largest model.
+pub const CHOICE_FAILED: &str = "not chosen: the criterion could not be evaluated at the fit \
+     (singular normal equations); the largest model (--max-terms) was kept";
+
+fn terms(choice: Option<&TermChoices>, fixed: bool) -> Terms {
     let one = |c: &TermChoice| Choice {
         terms: c.terms,
         candidates: c.candidates.clone(),
     };
     match choice {
-        Some([f, b]) => Terms {
+        Some(c) => Terms {
             criterion: CRITERION.into(),
-            front: Some(one(f)),
-            back: Some(one(b)),
+            front: Some(one(&c.front)),
+            back: c.back.as_ref().map(one),
         },
         None => Terms {
-            criterion: "fixed by --terms".into(),
+            criterion: if fixed {
+                "fixed by --terms".into()
+            } else {
+                CHOICE_FAILED.into()
+            },
             front: None,
             back: None,
         },
     }
+}
+
+/// The surface-domain fit's ending: converged when its largest step fell
+/// below the tolerance in σ, else stopped by its iteration limit, with the
+/// last step in σ of the coefficient (its own account, `max_step_sigma`).
+/// It does not flag the result: where it did not converge both surfaces
+/// are withheld as not reconstructed, with the reason
+/// (`pipeline::estimator::withheld`), so no unconverged figure is reported.
+fn direct_convergence(d: &crate::solve::direct::DirectReport) -> Convergence {
+    let last = d.iterations.last().map(|i| i.max_step_sigma);
+    let stopped_by = if d.converged {
+        "largest step below its tolerance in sigma".to_string()
+    } else {
+        format!(
+            "iteration limit ({} iterations; the surfaces are withheld as not reconstructed)",
+            d.iterations.len()
+        )
+    };
+    let mut c = Convergence::new("surface-domain fit", stopped_by, d.converged, None, false);
+    c.step_in_sigma = last.filter(|r| r.is_finite());
+    c.flags_result = false;
+    c
 }
 
 fn stage(s: &Stage) -> StageSummary {

@@ -43,6 +43,7 @@ mod console_cli;
 mod console_hostile;
 mod console_http;
 mod console_security;
+mod convergence;
 mod direct_thin;
 mod exit_statuses;
 mod figures;

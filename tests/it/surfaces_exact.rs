@@ -48,7 +48,9 @@ fn run(station: &Station, terms: Option<usize>, seed: u64) -> (f64, f64) {
     }
     println!(
         "choice {:?}",
-        sol.choice.as_ref().map(|c| (c[0].terms, c[1].terms))
+        sol.choice
+            .as_ref()
+            .map(|c| (c.front.terms, c.back.as_ref().map(|b| b.terms)))
     );
     println!("cond {:.3e} chi2 {:.3e}", sol.condition_number, sol.chi2);
     let ef = rms_err(&sol.front, front.coefficients_nm());

@@ -24,12 +24,14 @@ struct Slope {
 /// Weighted least-squares fit of Zernike gradients (terms j ≥ 2) to the
 /// slopes, by normal equations built on all cores (the modal slope problem
 /// is well conditioned, κ ≈ 100 for 150 terms on a full disk, so squaring it
-/// costs nothing measurable). Returns nm coefficients (piston 0) and the
-/// condition number of the weighted design matrix.
+/// costs nothing measurable). Returns nm coefficients (piston 0), the
+/// condition number of the weighted design matrix and the length of the
+/// coefficients' σ vector, nm (√ of the trace of their covariance at the
+/// slopes' σ).
 fn fit_slopes_parallel(
     basis: &ZernikeBasis,
     pts: &[Slope],
-) -> Result<(Vec<f64>, f64), SurfaceError> {
+) -> Result<(Vec<f64>, f64, f64), SurfaceError> {
     let n = basis.n_terms();
     let p = n - 1;
     if 2 * pts.len() < p {
@@ -40,7 +42,9 @@ fn fit_slopes_parallel(
         });
     }
     let zero = || (DMatrix::<f64>::zeros(p, p), DVector::<f64>::zeros(p));
-    let (a, b) = pts
+    // Summed in chunk order (collected first): a reduction joined in the
+    // order work stealing finishes would change the last bits run to run.
+    let parts: Vec<(DMatrix<f64>, DVector<f64>)> = pts
         .par_chunks(256)
         .map(|chunk| {
             let mut cols = DMatrix::<f64>::zeros(p, 2 * chunk.len());
@@ -63,7 +67,10 @@ fn fit_slopes_parallel(
             b.gemv(1.0, &cols, &rhs, 0.0);
             (a, b)
         })
-        .reduce(zero, |x, y| (x.0 + y.0, x.1 + y.1));
+        .collect();
+    let (a, b) = parts
+        .into_iter()
+        .fold(zero(), |x, y| (x.0 + y.0, x.1 + y.1));
     let eig = a.clone().symmetric_eigen().eigenvalues;
     let (lo, hi) = (eig.min(), eig.max());
     let condition_number = if lo > 0.0 {
@@ -79,9 +86,10 @@ fn fit_slopes_parallel(
             condition_number,
         })?;
     let x = chol.solve(&b);
+    let sigma_nm = chol.inverse().trace().max(0.0).sqrt();
     let mut c = vec![0.0; n];
     c[1..].copy_from_slice(x.as_slice());
-    Ok((c, condition_number))
+    Ok((c, condition_number, sigma_nm))
 }
 
 /// How the slope iteration ended.
@@ -89,8 +97,15 @@ fn fit_slopes_parallel(
 pub struct FrontReport {
     /// Iterations run (slope fits).
     pub iterations: usize,
-    /// RMS change of the coefficients in the last iteration, nm.
+    /// Length of the change of the coefficient vector in the last
+    /// iteration, nm (√ of the sum of squared changes).
     pub last_change_nm: f64,
+    /// Whether the change fell below [`CHANGE_TOL_NM`] (else the iteration
+    /// limit stopped it).
+    pub converged: bool,
+    /// Length of the coefficients' σ vector at the slopes' σ, nm: what
+    /// `last_change_nm` is measured against.
+    pub sigma_nm: f64,
     /// Condition number of the last slope fit.
     pub condition_number: f64,
     /// Pixels whose slopes entered.
@@ -99,7 +114,7 @@ pub struct FrontReport {
 
 /// Stop when the coefficients move less than this between iterations, nm
 /// RMS: far below any measurable height (1 pm).
-const CHANGE_TOL_NM: f64 = 1e-3;
+pub const CHANGE_TOL_NM: f64 = 1e-3;
 
 /// The front with `terms` Noll terms from the S1 points of `obs`; piston is
 /// 0 (the reference plane of the station defines it: slopes cannot).
@@ -120,6 +135,8 @@ pub fn front_from_slopes(
     let mut report = FrontReport {
         iterations: 0,
         last_change_nm: f64::INFINITY,
+        converged: false,
+        sigma_nm: f64::NAN,
         condition_number: f64::NAN,
         points: 0,
     };
@@ -163,7 +180,7 @@ pub fn front_from_slopes(
                 need: terms - 1,
             });
         }
-        let (coefficients, condition_number) = fit_slopes_parallel(&basis, &pts)?;
+        let (coefficients, condition_number, sigma_nm) = fit_slopes_parallel(&basis, &pts)?;
         let change = coefficients
             .iter()
             .zip(front.coefficients_nm())
@@ -175,7 +192,9 @@ pub fn front_from_slopes(
         report.last_change_nm = change;
         report.condition_number = condition_number;
         report.points = pts.len();
+        report.sigma_nm = sigma_nm;
         if change < CHANGE_TOL_NM {
+            report.converged = true;
             break;
         }
     }

@@ -6,6 +6,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::convergence::StepSize;
 use super::problem::{accumulate, Layout, Normal, Observations};
 use super::SurfaceError;
 use crate::kernels::lm::{self, Damping, LeastSquares, Linearisation, Stop};
@@ -71,6 +72,10 @@ pub struct LmReport {
     pub reason: String,
     /// Measured paths the final surfaces could not trace (front, back).
     pub failed: [usize; 2],
+    /// The last step solved against the σ of the coefficients it moved
+    /// (at the end's normal equations); `None` where no step was solved or
+    /// the normal equations are singular.
+    pub last_step: Option<StepSize>,
 }
 
 /// The plate with the free coefficients of `layout` moved by `delta`.
@@ -256,6 +261,10 @@ pub fn levenberg_marquardt(
     };
     *plate = out.params;
     let cur = out.normal.normal;
+    let last_step = out
+        .last_step
+        .as_ref()
+        .and_then(|s| step_against_sigma(&cur, s, obs.sigma_known));
     let report = LmReport {
         iterations: 1 + out.trials,
         chi2_start,
@@ -264,8 +273,30 @@ pub fn levenberg_marquardt(
         converged,
         reason,
         failed: cur.failed,
+        last_step,
     };
     Ok((report, cur))
+}
+
+/// The coefficient of `step` that moved most in units of its own σ, and
+/// that σ: `√((JᵀJ)⁻¹ᵢᵢ · s)` at the normal equations `n`, `s` the scale the
+/// solution's covariance takes (max(1, χ²/dof) with known σ, χ²/dof
+/// otherwise; see `solve::finish`). `None` where `n` cannot be inverted.
+fn step_against_sigma(n: &Normal, step: &DVector<f64>, sigma_known: bool) -> Option<StepSize> {
+    let inv = n.a.clone().cholesky()?.inverse();
+    let dof = n.n_resid.saturating_sub(n.a.nrows()).max(1) as f64;
+    let reduced = n.chi2 / dof;
+    let scale = if sigma_known {
+        reduced.max(1.0)
+    } else {
+        reduced
+    };
+    (0..step.len().min(inv.nrows()))
+        .map(|i| StepSize {
+            step_nm: step[i].abs(),
+            sigma_nm: (inv[(i, i)] * scale).max(0.0).sqrt(),
+        })
+        .max_by(|a, b| a.in_sigma().total_cmp(&b.in_sigma()))
 }
 
 /// Whether the loop's stop is convergence, and why in words; `None` where

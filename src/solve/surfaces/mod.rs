@@ -9,10 +9,12 @@
 //! spectral solver's σ, with the coefficient covariance; the number of
 //! terms chosen by the Bayesian information criterion ([`select`]).
 
+pub mod convergence;
 pub mod dual;
 pub mod front;
 pub mod lm;
 pub mod observe;
+mod outliers;
 pub mod path;
 pub mod problem;
 pub mod report;

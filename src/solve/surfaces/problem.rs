@@ -161,10 +161,15 @@ pub fn accumulate(
     jacobian: bool,
 ) -> Normal {
     let p = if jacobian { layout.columns() } else { 0 };
-    obs.pixels
+    // The chunks' sums are added in chunk order, not in the order rayon's
+    // work stealing happens to join them: floating-point addition does not
+    // associate, and the same inputs must give the same surfaces bit for bit.
+    let parts: Vec<Normal> = obs
+        .pixels
         .par_chunks(128)
         .map(|chunk| accumulate_chunk(chunk, obs, station, plate, layout, p))
-        .reduce(|| Normal::zeros(p), Normal::merge)
+        .collect();
+    parts.into_iter().fold(Normal::zeros(p), Normal::merge)
 }
 
 #[allow(clippy::needless_range_loop)]

@@ -7,6 +7,8 @@ use nalgebra::{DMatrix, DVector};
 
 use super::front::{front_from_slopes, FrontReport};
 use super::lm::{levenberg_marquardt, LmOptions, LmReport};
+use super::outliers::{outliers, without};
+pub use super::outliers::{OUTLIER_CHI2, OUTLIER_RULE};
 use super::problem::{Layout, Normal, Observations};
 use super::select::{choose_terms, TermChoice};
 use super::SurfaceError;
@@ -98,8 +100,11 @@ pub struct SurfaceSolution {
     pub layout: Layout,
     /// Stages run, in order.
     pub stages: Vec<Stage>,
-    /// The term choice (front, back) when not fixed by the user.
-    pub choice: Option<[TermChoice; 2]>,
+    /// The term choice (front, and the back where it was fitted) when not
+    /// fixed by the caller.
+    pub choice: Option<TermChoices>,
+    /// Whether the caller fixed the term count ([`SurfaceOptions::terms`]).
+    pub terms_fixed: bool,
     /// Final χ², residual components, and χ²/(N − p).
     pub chi2: f64,
     /// Residual components of the final fit.
@@ -199,6 +204,7 @@ pub fn reconstruct(
     }
     let mut sol = finish(plate, layout, normal, stages, choice, obs.sigma_known)?;
     sol.rejected = obs.rejected.clone();
+    sol.terms_fixed = opts.terms.is_some();
     Ok(sol)
 }
 
@@ -218,6 +224,15 @@ fn front_stage(
 
     let t = Instant::now();
     let (front, rep) = front_from_slopes(obs, station, &plate, terms, opts.front_iter)?;
+    if !rep.converged {
+        log::warn!(
+            "front slopes: stopped by its iteration limit {}, last change {:.4} nm against a σ \
+             of {:.4} nm",
+            rep.iterations,
+            rep.last_change_nm,
+            rep.sigma_nm
+        );
+    }
     plate.front = front;
     stages.push(Stage {
         name: "front slopes",
@@ -229,10 +244,12 @@ fn front_stage(
     Ok((terms, plate, stages))
 }
 
-/// The term choice on the joint fit's normal equations (`normal`); where
-/// it differs from the fitted counts, the surfaces are truncated to it and
-/// fitted again ("joint (chosen terms)"). Returns the choice and, when
-/// refitted, the new normal equations; `None` when no choice was possible.
+/// The term choice on the joint fit's normal equations (`normal`): the
+/// front's, and the back's where it was fitted (a one-surface element, a
+/// mirror or an AR-coated back, has the front's alone); where it differs
+/// from the fitted counts, the surfaces are truncated to it and fitted
+/// again ("joint (chosen terms)"). Returns the choice and, when refitted,
+/// the new normal equations; `None` when no choice was possible.
 fn refit_chosen_terms(
     obs: &Observations,
     station: &Station,
@@ -243,29 +260,45 @@ fn refit_chosen_terms(
     stages: &mut Vec<Stage>,
 ) -> Result<Option<ChosenTerms>, SurfaceError> {
     let x = free_values(plate, layout);
-    let f = choose_terms(normal, layout, &x, false, obs.sigma_known);
-    let b = choose_terms(normal, layout, &x, true, obs.sigma_known);
-    let (Some(f), Some(b)) = (f, b) else {
+    let Some(f) = choose_terms(normal, layout, &x, false, obs.sigma_known) else {
         return Ok(None);
     };
-    let mut refitted = None;
-    if f.terms != layout.front_terms || b.terms != layout.back_terms {
-        plate.front = truncate(&plate.front, f.terms)?;
-        plate.back = truncate(&plate.back, b.terms)?;
-        layout.front_terms = f.terms;
-        layout.back_terms = if layout.fit_back { b.terms } else { f.terms };
-        if !layout.fit_back {
-            plate.back = truncate(&plate.back, f.terms)?;
+    let b = if layout.fit_back {
+        match choose_terms(normal, layout, &x, true, obs.sigma_known) {
+            Some(b) => Some(b),
+            None => return Ok(None),
         }
+    } else {
+        None
+    };
+    // Without a fitted back the back stays the nominal one, carried with
+    // the front's count.
+    let back_terms = b.as_ref().map_or(f.terms, |b| b.terms);
+    let mut refitted = None;
+    if f.terms != layout.front_terms || back_terms != layout.back_terms {
+        plate.front = truncate(&plate.front, f.terms)?;
+        plate.back = truncate(&plate.back, back_terms)?;
+        layout.front_terms = f.terms;
+        layout.back_terms = back_terms;
         let stage = "joint (chosen terms)";
         refitted = Some(lm_stage(obs, station, plate, layout, stage, opts, stages)?);
     }
-    Ok(Some(([f, b], refitted)))
+    Ok(Some((TermChoices { front: f, back: b }, refitted)))
 }
 
-/// The terms chosen for (front, back), and the normal equations of the
-/// refit when the choice changed the model.
-type ChosenTerms = ([TermChoice; 2], Option<Normal>);
+/// The term counts chosen by the criterion.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TermChoices {
+    /// The front's.
+    pub front: TermChoice,
+    /// The back's; `None` where no back reflection was measured (the back
+    /// is not fitted).
+    pub back: Option<TermChoice>,
+}
+
+/// The terms chosen, and the normal equations of the refit when the choice
+/// changed the model.
+type ChosenTerms = (TermChoices, Option<Normal>);
 
 /// When the term count is the data's to choose: shrink the model (the
 /// back first, by full Noll orders, then the front) until its Jacobian at
@@ -296,77 +329,6 @@ fn determined_layout(
     }
 }
 
-/// A pixel whose whitened χ² exceeds this (times the fit's scale, below)
-/// is an outlier: a wrong point from the spectral stage, e.g. a mislabelled
-/// pair at the rim. For a correct pixel χ² follows χ²(≤ 4 dof):
-/// P(χ²₄ > 49) ≈ 6e-10, so on 10⁵ pixels the rule rejects an honest one
-/// with probability < 1e-4.
-pub const OUTLIER_CHI2: f64 = 49.0;
-
-/// At most this fraction of the pixels is left out: beyond it the model,
-/// not a few points, is wrong, and the residuals say so (χ²/dof).
-const MAX_OUTLIER_FRACTION: f64 = 0.01;
-
-/// The outlier rule in words, for reports (`summary.json`).
-pub const OUTLIER_RULE: &str = "pixel chi2 of its whitened residuals > 49 x max(1, median chi2 \
-     per component / 0.75), at most 1 % of the pixels";
-
-/// Pixels (indices into `obs.pixels`) whose χ² at the current fit exceeds
-/// [`OUTLIER_CHI2`] times the fit's scale: the median of χ²/(components)
-/// over the pixels divided by its expectation (≈ 0.75 for 2–4 components),
-/// at least 1 — so a model that fits every pixel equally badly rejects
-/// nothing, and neither does σ estimated from the residuals.
-fn outliers(obs: &Observations, station: &Station, plate: &Plate, layout: &Layout) -> Vec<usize> {
-    let chi2 = super::problem::pixel_chi2(obs, station, plate, layout);
-    let mut per: Vec<f64> = chi2
-        .iter()
-        .zip(&obs.pixels)
-        .filter(|(c, _)| c.is_finite())
-        .map(|(c, p)| {
-            let m = 2
-                * (usize::from(p.has(0) && layout.use_s1) + usize::from(p.has(1) && layout.use_s2));
-            c / m.max(1) as f64
-        })
-        .collect();
-    if per.is_empty() {
-        return Vec::new();
-    }
-    per.sort_by(f64::total_cmp);
-    let scale = (per[per.len() / 2] / 0.75).max(1.0);
-    let out: Vec<usize> = chi2
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| **c > OUTLIER_CHI2 * scale)
-        .map(|(k, _)| k)
-        .collect();
-    if out.len() as f64 > MAX_OUTLIER_FRACTION * obs.pixels.len() as f64 {
-        return Vec::new();
-    }
-    out
-}
-
-fn without(obs: &Observations, rejected: &[usize]) -> Observations {
-    let mut keep = vec![true; obs.pixels.len()];
-    rejected.iter().for_each(|&k| keep[k] = false);
-    Observations {
-        camera: obs.camera,
-        pixels: obs
-            .pixels
-            .iter()
-            .zip(&keep)
-            .filter(|(_, k)| **k)
-            .map(|(p, _)| *p)
-            .collect(),
-        sigma_known: obs.sigma_known,
-        rejected: obs
-            .rejected
-            .iter()
-            .copied()
-            .chain(rejected.iter().map(|&k| obs.pixels[k].pixel))
-            .collect(),
-    }
-}
-
 fn lm_stage(
     obs: &Observations,
     station: &Station,
@@ -378,6 +340,13 @@ fn lm_stage(
 ) -> Result<Normal, SurfaceError> {
     let t = Instant::now();
     let (rep, normal) = levenberg_marquardt(obs, station, plate, layout, name, &opts.lm)?;
+    if !rep.converged {
+        let step = rep.last_step.map_or_else(
+            || "not measured".into(),
+            |s| format!("{:.4} nm = {:.3} σ", s.step_nm, s.in_sigma()),
+        );
+        log::warn!("{name}: stopped by {}, last step {step}", rep.reason);
+    }
     stages.push(Stage {
         name,
         seconds: t.elapsed().as_secs_f64(),
@@ -418,7 +387,7 @@ fn finish(
     layout: Layout,
     normal: Normal,
     stages: Vec<Stage>,
-    choice: Option<[TermChoice; 2]>,
+    choice: Option<TermChoices>,
     sigma_known: bool,
 ) -> Result<SurfaceSolution, SurfaceError> {
     let p = layout.columns();
@@ -465,6 +434,7 @@ fn finish(
         layout,
         stages,
         choice,
+        terms_fixed: false,
         chi2: normal.chi2,
         n_resid: normal.n_resid,
         reduced_chi2,

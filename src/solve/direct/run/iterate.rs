@@ -11,6 +11,7 @@ use super::{DirectError, DirectOptions, Fitted, Iteration, ThirdReflection};
 use crate::optics::station::Station;
 use crate::optics::trace::Plate;
 use crate::solve::spectral::{SpectralMaps, SpectralSolver};
+use crate::solve::surfaces::solve::TermChoices;
 use crate::solve::surfaces::{
     reconstruct, Observations, SurfaceError, SurfaceOptions, SurfaceSolution,
 };
@@ -84,6 +85,8 @@ struct State {
     solve_opts: SurfaceOptions,
     iterations: Vec<Iteration>,
     last_terms: Option<[usize; 2]>,
+    /// The last term choice the criterion made (later solves hold it).
+    choice: Option<TermChoices>,
     solution: Option<SurfaceSolution>,
     model: Model,
     third: Option<ThirdReflection>,
@@ -125,6 +128,7 @@ impl State {
             solve_opts,
             iterations: Vec::new(),
             last_terms: None,
+            choice: None,
             solution: None,
             model: Model::default(),
             third: None,
@@ -171,6 +175,13 @@ impl State {
         self.pix = next;
         self.plate = step.plate;
         let mut sol = sol;
+        // Once the counts are held the solves no longer choose: the result
+        // keeps the choice that set them, and says who fixed them.
+        if sol.choice.is_some() {
+            self.choice = sol.choice.clone();
+        }
+        sol.choice = sol.choice.or_else(|| self.choice.clone());
+        sol.terms_fixed = surface.terms.is_some();
         sol.front = self.plate.front.clone();
         sol.back = self.plate.back.clone();
         self.iterations.push(Iteration {

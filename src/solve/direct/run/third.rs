@@ -54,7 +54,8 @@ pub(super) fn third_step(
     pix: &[Pix],
     model: &Model,
 ) -> Option<(f64, f64)> {
-    let [u, i] = pix
+    // Collected in pixel order and summed in it: the same sum on every run.
+    let parts: Vec<[f64; 2]> = pix
         .par_iter()
         .filter(|x| x.p.k == 2)
         .filter_map(|x| {
@@ -68,7 +69,10 @@ pub(super) fn third_step(
                 Some(s) => solver.with_samples_at(x.q, &x.p, s, score)?,
             }
         })
-        .reduce(|| [0.0, 0.0], |a, b| [a[0] + b[0], a[1] + b[1]]);
+        .collect();
+    let [u, i] = parts
+        .into_iter()
+        .fold([0.0, 0.0], |a, b| [a[0] + b[0], a[1] + b[1]]);
     (i > 0.0).then(|| (u / i, i.sqrt().recip()))
 }
 
