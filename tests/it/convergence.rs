@@ -204,3 +204,49 @@ fn a_one_surface_element_gets_its_terms_chosen() {
     assert!(stages.contains(&"joint (chosen terms)"), "{stages:?}");
     assert_eq!(s["front"]["terms"], 36, "{}", s["front"]);
 }
+
+/// A flat mirror rendered from frames (`mfd simulate --display-gamma`: the
+/// front reflection alone, phase-shifting on an unlinearised display) and
+/// reconstructed: the front's terms are chosen by the criterion, not kept
+/// at `--max-terms`. The truth is a plane (3 terms); a larger model is
+/// chosen only when its extra terms lower χ² by more than their penalty,
+/// ln N ≈ 7.8 each (N ≈ 2400 slopes) — for 3 terms of pure noise
+/// P(χ²₃ > 23) ≈ 4e-5 — so the choice is the plane.
+#[test]
+fn a_mirror_from_frames_gets_its_terms_chosen() {
+    let dir = tempfile::tempdir().unwrap();
+    let (acq, out) = (dir.path().join("acq"), dir.path().join("res"));
+    let station = fixture("station.toml");
+    common::mfd_ok(&[
+        "simulate",
+        "--station",
+        station.to_str().unwrap(),
+        "--display-gamma",
+        "2.2",
+        "--phases",
+        "0,1.5707963,3.1415927,4.712389",
+        "--tau-start",
+        "1",
+        "--tau-stop",
+        "16",
+        "--tau-step",
+        "1",
+        "--out",
+        acq.to_str().unwrap(),
+    ]);
+    let text = common::mfd_ok(&[
+        "reconstruct",
+        acq.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(text.contains("back: not reconstructed"), "{text}");
+    let s = summary(&out);
+    let terms = &s["terms"];
+    assert!(
+        terms["criterion"].as_str().unwrap().starts_with("BIC"),
+        "{terms}"
+    );
+    assert_eq!(terms["front"]["terms"], 3, "{terms}");
+    assert!(terms.get("back").is_none(), "{terms}");
+}
