@@ -164,3 +164,74 @@ pub fn of_stages(stages: &[Stage]) -> Vec<Convergence> {
 pub fn flagged(list: &[Convergence]) -> bool {
     list.iter().any(|c| c.flags_result)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solve::surfaces::lm::LmReport;
+
+    fn lm_stage(name: &'static str, converged: bool, step: Option<StepSize>) -> Stage {
+        Stage {
+            name,
+            seconds: 0.0,
+            front: None,
+            lm: Some(LmReport {
+                iterations: 30,
+                chi2_start: 1.0,
+                chi2: 1.0,
+                n_resid: 10,
+                converged,
+                reason: if converged {
+                    "step below 0.0001 nm".into()
+                } else {
+                    "iteration limit 30".into()
+                },
+                failed: [0, 0],
+                last_step: step,
+            }),
+        }
+    }
+
+    const BEYOND: StepSize = StepSize {
+        step_nm: 3.0,
+        sigma_nm: 1.0,
+    };
+    const WITHIN: StepSize = StepSize {
+        step_nm: 0.5,
+        sigma_nm: 1.0,
+    };
+
+    /// The rule: flagged only when not converged, beyond σ (or not
+    /// measured), and the last word on its surfaces.
+    #[test]
+    fn only_a_last_stage_stopped_beyond_its_sigma_flags() {
+        let c = |conv, step, sup| Convergence::new("s", String::new(), conv, step, sup);
+        assert!(c(false, Some(BEYOND), false).flags_result);
+        assert!(c(false, None, false).flags_result);
+        assert!(!c(false, Some(WITHIN), false).flags_result);
+        assert!(!c(false, Some(BEYOND), true).flags_result);
+        assert!(!c(true, Some(BEYOND), false).flags_result);
+        assert_eq!(c(false, Some(BEYOND), false).step_in_sigma, Some(3.0));
+    }
+
+    /// A stage refitted by a later joint stage is superseded; the last one
+    /// decides.
+    #[test]
+    fn a_later_joint_stage_supersedes() {
+        let stages = [
+            lm_stage("back", false, Some(BEYOND)),
+            lm_stage("joint", false, Some(BEYOND)),
+        ];
+        let list = of_stages(&stages);
+        assert!(list[0].superseded && !list[0].flags_result);
+        assert!(!list[1].superseded && list[1].flags_result);
+        assert!(flagged(&list));
+        let list = of_stages(&stages[..1]);
+        assert!(list[0].flags_result, "back with no joint after it decides");
+        let fine = [
+            lm_stage("back", false, Some(BEYOND)),
+            lm_stage("joint", true, Some(WITHIN)),
+        ];
+        assert!(!flagged(&of_stages(&fine)));
+    }
+}
