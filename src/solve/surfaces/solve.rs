@@ -79,6 +79,8 @@ pub struct Stage {
 /// The reconstructed surfaces with their uncertainty.
 #[derive(Debug, Clone)]
 pub struct SurfaceSolution {
+    /// The element's outline: every figure is taken over it.
+    pub outline: crate::optics::outline::Outline,
     /// Front surface (piston 0: the reference plane).
     pub front: ZernikeSurface,
     /// Back surface (departure from `z = −thickness`); flat and not
@@ -127,6 +129,15 @@ pub fn reconstruct(
     // Everything is fitted in the element's own frame (station v2's pose);
     // `obs` were built in it by `Observations::from_maps`.
     let station = &station.element_frame();
+    // An outline too narrow for the terms asked is said before fitting:
+    // its figures would not exist (`optics::outline::orthonormal`).
+    let most = opts.terms.unwrap_or(opts.max_terms).max(3);
+    if let Err(e) = station.element.outline().orthonormal(most) {
+        return Err(SurfaceError::Input {
+            what: "element.outline",
+            problem: e.to_string(),
+        });
+    }
     let weighted = opts.weighted(obs);
     let obs = &*weighted;
     let (terms, mut plate, mut stages) = front_stage(obs, station, opts)?;
@@ -455,6 +466,7 @@ fn finish(
     let front_std_nm = std_of(layout.front_terms, &|k| layout.front_col(k));
     let back_std_nm = std_of(layout.back_terms, &|k| layout.back_col(k));
     Ok(SurfaceSolution {
+        outline: plate.outline.clone(),
         front: plate.front,
         back: plate.back,
         back_fitted: layout.fit_back,
