@@ -169,3 +169,4 @@ fn the_disk_is_its_own_set_and_the_rim_follows_the_outline() {
     assert!(r.contains(0.9, 1.9) && !r.contains(1.1, 0.0));
     assert!((r.outside_by_mm(3.0, 0.0) - 2.0).abs() < 1e-12);
 }
+
