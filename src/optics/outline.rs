@@ -147,6 +147,27 @@ impl Outline {
     pub fn orthonormal(&self, terms: usize) -> Result<Orthonormal, OutlineError> {
         Orthonormal::new(self, terms)
     }
+
+    /// The most terms up to `max` the outline supports: `max` itself, or
+    /// the full radial orders below the first term that is dependent over
+    /// it (at least the plane, 3 terms).
+    ///
+    /// # Errors
+    /// [`OutlineError`] when not even the plane is independent over it.
+    pub fn supported_terms(&self, max: usize) -> Result<usize, OutlineError> {
+        match self.orthonormal(max) {
+            Ok(_) => Ok(max),
+            Err(OutlineError::TooNarrow { term, .. }) if term > 3 => {
+                let full = (1..)
+                    .map(crate::optics::zernike::terms_up_to_order)
+                    .take_while(|&t| t < term)
+                    .last()
+                    .unwrap_or(3);
+                self.orthonormal(full).map(|_| full)
+            }
+            Err(e) => Err(e),
+        }
+    }
 }
 
 /// The corners of a rectangle (counter-clockwise) or a polygon's vertices.

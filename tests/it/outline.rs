@@ -13,6 +13,8 @@ use mfd::solve::surfaces::report::{figures, REMOVED_TERMS};
 
 use crate::wedge::chain::{binned_paper_station, run_solved, Scene};
 
+mod soak;
+
 const PAPER_V1: &str = include_str!("../../calib/paper-sim.toml");
 
 /// The paper's station text with `[element]`'s aperture and an outline
@@ -163,13 +165,7 @@ fn a_square_element_is_reconstructed_over_the_square_at_the_bound() {
             (&sol.back, &solved.truth[1])
         };
         let f = figures(sol, k == 1);
-        let q = outline.orthonormal(fit.coefficients_nm().len()).unwrap();
-        let diff: Vec<f64> = (0..fit.coefficients_nm().len())
-            .map(|j| {
-                fit.coefficients_nm()[j] - truth.coefficients_nm().get(j).copied().unwrap_or(0.0)
-            })
-            .collect();
-        let error = q.rms(&diff, REMOVED_TERMS);
+        let error = o.error[k];
         let bound = o.bound.unwrap()[k];
         let (t_rms, t_pv) = truth_over(truth, &outline);
         eprintln!(

@@ -150,6 +150,13 @@ fn a_sliver_too_narrow_for_the_terms_is_named() {
     let e = o.orthonormal(66).unwrap_err().to_string();
     assert!(e.contains("too narrow") && e.contains("66"), "{e}");
     assert!(o.orthonormal(3).is_ok());
+    // The choice stops at the full orders it supports.
+    let most = o.supported_terms(66).unwrap();
+    assert!(
+        (3..66).contains(&most) && o.orthonormal(most).is_ok(),
+        "{most}"
+    );
+    assert!(crate::optics::zernike::terms_up_to_order(1) <= most);
 }
 
 #[test]
@@ -169,4 +176,3 @@ fn the_disk_is_its_own_set_and_the_rim_follows_the_outline() {
     assert!(r.contains(0.9, 1.9) && !r.contains(1.1, 0.0));
     assert!((r.outside_by_mm(3.0, 0.0) - 2.0).abs() < 1e-12);
 }
-

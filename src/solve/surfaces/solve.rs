@@ -114,6 +114,36 @@ pub struct SurfaceSolution {
     pub condition_number: f64,
 }
 
+/// `opts` with `max_terms` lowered to the full radial orders the element's
+/// outline supports (a narrow outline makes high orders dependent over it:
+/// `optics::outline::orthonormal`).
+///
+/// # Errors
+/// [`SurfaceError::Input`] naming `element.outline` when fixed `terms` or
+/// even the plane are beyond it.
+fn outline_terms(station: &Station, opts: &SurfaceOptions) -> Result<SurfaceOptions, SurfaceError> {
+    let outline = station.element.outline();
+    let refuse = |e: crate::optics::outline::OutlineError| SurfaceError::Input {
+        what: "element.outline",
+        problem: e.to_string(),
+    };
+    match opts.terms {
+        Some(t) => outline
+            .orthonormal(t.max(3))
+            .map(|_| opts.clone())
+            .map_err(refuse),
+        None => {
+            let most = outline
+                .supported_terms(opts.max_terms.max(3))
+                .map_err(refuse)?;
+            Ok(SurfaceOptions {
+                max_terms: most,
+                ..opts.clone()
+            })
+        }
+    }
+}
+
 /// Runs every stage on `obs`: the front from its slopes, the back on S2,
 /// the joint fit, outliers out and refit, the term choice and its refit.
 /// (About 80 lines: the sequence of stages, each one call, reads best
@@ -129,15 +159,9 @@ pub fn reconstruct(
     // Everything is fitted in the element's own frame (station v2's pose);
     // `obs` were built in it by `Observations::from_maps`.
     let station = &station.element_frame();
-    // An outline too narrow for the terms asked is said before fitting:
-    // its figures would not exist (`optics::outline::orthonormal`).
-    let most = opts.terms.unwrap_or(opts.max_terms).max(3);
-    if let Err(e) = station.element.outline().orthonormal(most) {
-        return Err(SurfaceError::Input {
-            what: "element.outline",
-            problem: e.to_string(),
-        });
-    }
+    // An outline too narrow for the terms asked: the choice stops at the
+    // orders it supports; terms fixed by the user are refused, named.
+    let opts = &outline_terms(station, opts)?;
     let weighted = opts.weighted(obs);
     let obs = &*weighted;
     let (terms, mut plate, mut stages) = front_stage(obs, station, opts)?;
