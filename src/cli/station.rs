@@ -6,6 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use nalgebra::Point2;
 
+use mfd::optics::outline::Shape;
 use mfd::optics::station::{
     CameraProfile, DisplayProfile, Element, Pose, Station, SymmetricLayout, Wedge,
 };
@@ -53,6 +54,16 @@ pub struct StationArgs {
     /// degrees (`element.wedge_azimuth_deg`).
     #[arg(long, value_parser = super::check::range(-360.0, 360.0, "degrees of azimuth"), default_value_t = 0.0, allow_negative_numbers = true)]
     wedge_azimuth_deg: f64,
+    /// A rectangular element: its sides along x and y, mm (the proposal
+    /// `mfd-station/3`'s `[element.outline]`, docs/proposals/outline.md).
+    /// The aperture radius becomes the rectangle's half-diagonal: the
+    /// least Zernike disk that contains it.
+    #[arg(long, value_parser = super::check::positive, value_delimiter = ',', num_args = 2)]
+    rectangle_mm: Option<Vec<f64>>,
+    /// The rectangle's rotation about the aperture centre, degrees from +x
+    /// towards +y.
+    #[arg(long, value_parser = super::check::range(-360.0, 360.0, "degrees of rotation"), default_value_t = 0.0, allow_negative_numbers = true, requires = "rectangle_mm")]
+    rectangle_rotation_deg: f64,
     /// Where to write the station.toml.
     #[arg(long)]
     out: PathBuf,
@@ -77,13 +88,22 @@ pub fn run(args: &StationArgs) -> anyhow::Result<()> {
                 arcmin: args.wedge_arcmin,
                 azimuth_deg: args.wedge_azimuth_deg,
             },
+            outline: Shape::Circle,
         },
     };
     let mut station = layout.build(&camera, &display)?;
     if let [rx, ry] = args.element_tilt_deg[..] {
         station.element.pose.tilt_deg = [rx, ry];
     }
-    if station.needs_version_2() {
+    if let Some([a, b]) = args.rectangle_mm.as_deref().map(|v| [v[0], v[1]]) {
+        station.element.outline = Shape::Rectangle {
+            sides_mm: [a, b],
+            rotation_deg: args.rectangle_rotation_deg,
+        };
+        let half_diagonal = a.hypot(b) / 2.0;
+        station.element.aperture_radius_mm = half_diagonal;
+    }
+    if station.needs_version_2() || station.needs_version_3() {
         // Through the file form: a tilted or wedged element is checked as a loaded one is.
         station = Station::from_file(&station.to_file(), &args.out)?;
     }

@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize};
 
-use crate::optics::station::Station;
+use crate::optics::outline::{Outline, Shape};
+use crate::optics::station::{OutlineFile, Station};
 use crate::optics::zernike::{ZernikeBasis, ZernikeError, ZernikeSurface};
 
 mod validate;
@@ -24,6 +25,9 @@ use crate::optics::zernike::MAX_TERMS;
 pub const SURFACES_FORMAT: &str = "mfd-surfaces/1";
 /// The format tag of a version-2 surfaces file (with uncertainties).
 pub const SURFACES_FORMAT_V2: &str = "mfd-surfaces/2";
+
+mod outline;
+pub use outline::{ORTHONORMAL_NAME, SURFACES_FORMAT_V3};
 
 /// What went wrong with a surfaces file.
 #[derive(Debug, thiserror::Error)]
@@ -103,8 +107,14 @@ pub struct SurfaceCoefficients {
     /// where one was given); `None` when not known (always in version 1).
     pub std_nm: Option<Vec<f64>>,
     /// Version 2: the expected RMS over the aperture of the reported minus
-    /// the true surface, piston and tilt removed, nm.
+    /// the true surface, piston and tilt removed, nm (version 3: over the
+    /// outline, its best-fit plane removed).
     pub expected_error_rms_nm: Option<f64>,
+    /// Version 3 (proposal): the 1σ of the coefficients in the polynomials
+    /// orthonormal over the outline, nm (the coefficients themselves
+    /// follow from `coefficients_nm` and the outline and are written, and
+    /// checked, from them).
+    pub orthonormal_std_nm: Option<Vec<f64>>,
 }
 
 /// One surface of the file.
@@ -138,10 +148,14 @@ impl SurfaceEntry {
 /// The whole file, either version.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SurfacesFile {
-    /// [`SURFACES_FORMAT`] or [`SURFACES_FORMAT_V2`].
+    /// [`SURFACES_FORMAT`], [`SURFACES_FORMAT_V2`] or the proposal
+    /// [`SURFACES_FORMAT_V3`].
     pub format: String,
     /// Basis definition.
     pub zernike: ZernikeSpec,
+    /// Version 3: the element's outline (centred on `zernike.center_mm`,
+    /// inside the Zernike disk); `None` in versions 1 and 2 (the disk).
+    pub outline: Option<Shape>,
     /// Front surface.
     pub front: SurfaceEntry,
     /// Back surface.
@@ -167,6 +181,10 @@ struct RawSurface {
         skip_serializing_if = "Option::is_none"
     )]
     not_reconstructed_because: Option<Option<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    orthonormal_coefficients_nm: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    orthonormal_std_nm: Option<Vec<f64>>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -174,6 +192,10 @@ struct RawSurface {
 struct RawFile {
     format: String,
     zernike: ZernikeSpec,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    outline: Option<OutlineFile>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    orthonormal: Option<String>,
     front: Option<RawSurface>,
     back: Option<RawSurface>,
 }
@@ -219,24 +241,28 @@ impl SurfacesFile {
             })?;
         let v2 = match raw.format.as_str() {
             SURFACES_FORMAT => false,
-            SURFACES_FORMAT_V2 => true,
+            SURFACES_FORMAT_V2 | SURFACES_FORMAT_V3 => true,
             other => {
                 return Err(invalid(
                     path,
                     "format",
                     format!(
-                    "expected \"{SURFACES_FORMAT}\" or \"{SURFACES_FORMAT_V2}\", found \"{other}\""
-                ),
+                        "expected \"{SURFACES_FORMAT}\", \"{SURFACES_FORMAT_V2}\" or the proposal \
+                     \"{SURFACES_FORMAT_V3}\", found \"{other}\""
+                    ),
                 ))
             }
         };
         check_zernike(&raw.zernike, path)?;
+        let shape = outline::check_file(&raw, path)?;
         let file = SurfacesFile {
-            front: entry(raw.front, "front", v2, path)?,
-            back: entry(raw.back, "back", v2, path)?,
-            format: raw.format,
-            zernike: raw.zernike,
+            front: entry(raw.front.clone(), "front", v2, path)?,
+            back: entry(raw.back.clone(), "back", v2, path)?,
+            format: raw.format.clone(),
+            zernike: raw.zernike.clone(),
+            outline: shape,
         };
+        outline::check_surfaces(&raw, &file, path)?;
         Ok(file)
     }
 
@@ -248,12 +274,16 @@ impl SurfacesFile {
     /// (`path` names the file in it).
     pub fn to_json_string(&self, path: &Path) -> Result<String, SurfacesFileError> {
         let v2 = self.format == SURFACES_FORMAT_V2;
-        let raw = RawFile {
+        let v2 = v2 || self.format == SURFACES_FORMAT_V3;
+        let mut raw = RawFile {
             format: self.format.clone(),
             zernike: self.zernike.clone(),
+            outline: None,
+            orthonormal: None,
             front: raw_entry(&self.front, v2),
             back: raw_entry(&self.back, v2),
         };
+        outline::fill_raw(self, &mut raw, path)?;
         // Plain numbers, strings and arrays: serialising cannot fail.
         let text = serde_json::to_string_pretty(&raw).unwrap_or_default() + "\n";
         Self::from_json_str(&text, path)?;
@@ -281,11 +311,13 @@ impl SurfacesFile {
                 coefficients_nm: s.coefficients_nm().to_vec(),
                 std_nm: None,
                 expected_error_rms_nm: None,
+                orthonormal_std_nm: None,
             })
         };
         SurfacesFile {
             format: SURFACES_FORMAT.to_string(),
             zernike: ZernikeSpec::of(front.basis()),
+            outline: None,
             front: plain(front),
             back: plain(back),
         }
@@ -296,9 +328,36 @@ impl SurfacesFile {
         SurfacesFile {
             format: SURFACES_FORMAT_V2.to_string(),
             zernike,
+            outline: None,
             front,
             back,
         }
+    }
+
+    /// A version-2 file, or for an outline other than the disk the
+    /// proposal's version 3 with it.
+    pub fn with_outline(
+        zernike: ZernikeSpec,
+        shape: &Shape,
+        front: SurfaceEntry,
+        back: SurfaceEntry,
+    ) -> Self {
+        let mut f = Self::v2(zernike, front, back);
+        if !shape.is_circle() {
+            f.format = SURFACES_FORMAT_V3.to_string();
+            f.outline = Some(shape.clone());
+        }
+        f
+    }
+
+    /// The outline the file's figures are over: the Zernike disk unless
+    /// version 3 gives one.
+    pub fn outline_in_place(&self) -> Outline {
+        Outline::new(
+            self.outline.clone().unwrap_or_default(),
+            self.zernike.center_mm,
+            self.zernike.radius_mm,
+        )
     }
 
     /// Front coefficients, if present.
@@ -323,12 +382,16 @@ fn raw_entry(e: &SurfaceEntry, v2: bool) -> Option<RawSurface> {
             std_nm: None,
             expected_error_rms_nm: None,
             not_reconstructed_because: Some(Some(b.clone())),
+            orthonormal_coefficients_nm: None,
+            orthonormal_std_nm: None,
         }),
         SurfaceEntry::Reconstructed(c) => Some(RawSurface {
             coefficients_nm: Some(Some(c.coefficients_nm.clone())),
             std_nm: c.std_nm.clone(),
             expected_error_rms_nm: c.expected_error_rms_nm,
             not_reconstructed_because: v2.then_some(None),
+            orthonormal_coefficients_nm: None,
+            orthonormal_std_nm: c.orthonormal_std_nm.clone(),
         }),
     }
 }

@@ -7,6 +7,7 @@
 //! rays to the screen. Everything downstream (simulator, solvers) builds on
 //! these.
 
+pub mod outline;
 pub mod refraction;
 pub mod station;
 pub mod trace;

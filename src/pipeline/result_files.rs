@@ -8,6 +8,7 @@ use super::{result_dir, DirectReport, PipelineError, Reconstruction, SurfaceStag
 use crate::budget::refine::Refined;
 use crate::formats::npy;
 use crate::formats::surfaces_file::{SurfaceCoefficients, SurfaceEntry, SurfacesFile, ZernikeSpec};
+use crate::optics::outline::Outline;
 use crate::optics::zernike::ZernikeSurface;
 use crate::report::pictures;
 use crate::report::summary::Summary;
@@ -75,7 +76,14 @@ fn write_surfaces(
         surfaces.push(("back", &sol.back, back));
     }
     for (name, surface, figures) in surfaces {
-        written.extend(write_surface(out, name, surface, figures, summary)?);
+        written.extend(write_surface(
+            out,
+            name,
+            surface,
+            &sol.outline,
+            figures,
+            summary,
+        )?);
     }
     written.extend(pictures::breakdown(out, summary)?);
     let path = out.join("summary.json");
@@ -120,11 +128,12 @@ fn write_surface(
     out: &Path,
     name: &str,
     surface: &ZernikeSurface,
+    outline: &Outline,
     figures: &SurfaceFigures,
     summary: &Summary,
 ) -> Result<Vec<PathBuf>, PipelineError> {
     let mut written = Vec::new();
-    let grid = height_grid(surface, HEIGHT_GRID);
+    let grid = height_grid(surface, outline, HEIGHT_GRID);
     let path = out.join(format!("{name}_height_nm.npy"));
     npy::write_f64(&path, &[HEIGHT_GRID, HEIGHT_GRID], &grid)?;
     written.push(path);
@@ -178,10 +187,19 @@ pub fn surfaces_file(stage: &SurfaceStage) -> SurfacesFile {
         let (std, expected) = summary
             .reported(back)
             .map_or((None, None), |(s, e)| (Some(s.to_vec()), Some(e)));
+        let figures = if back {
+            summary.back.as_ref()
+        } else {
+            Some(&summary.front)
+        };
         SurfaceEntry::Reconstructed(SurfaceCoefficients {
             coefficients_nm: surface.coefficients_nm().to_vec(),
             std_nm: std,
             expected_error_rms_nm: expected,
+            // The orthonormal σ are the noise's: not written beside a station part.
+            orthonormal_std_nm: figures
+                .filter(|_| summary.station.is_none())
+                .and_then(|f| f.orthonormal_std_nm.clone()),
         })
     };
     let not = |because: &str| SurfaceEntry::NotReconstructed {
@@ -196,5 +214,10 @@ pub fn surfaces_file(stage: &SurfaceStage) -> SurfacesFile {
         (Some(why), true) => not(why),
         (None, true) => entry(&sol.back, true),
     };
-    SurfacesFile::v2(ZernikeSpec::of(sol.front.basis()), front, back)
+    SurfacesFile::with_outline(
+        ZernikeSpec::of(sol.front.basis()),
+        &sol.outline.shape,
+        front,
+        back,
+    )
 }

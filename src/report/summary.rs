@@ -32,6 +32,10 @@ const LISTED_OUTLIERS: usize = 1000;
 pub struct Summary {
     /// Always [`SUMMARY_FORMAT`].
     pub format: String,
+    /// The outline every figure is over (not written: the figures say it
+    /// in words, `front.outline`).
+    #[serde(skip)]
+    pub over: Option<crate::optics::outline::Outline>,
     /// Pixels with a measured S1 and S2.
     pub pixels: PixelCounts,
     /// Whether the screen points' σ came from the data (the spectral stage)
@@ -272,6 +276,7 @@ impl Summary {
     pub fn new(obs: &Observations, sol: &SurfaceSolution, seconds: f64) -> Summary {
         Summary {
             format: SUMMARY_FORMAT.into(),
+            over: Some(sol.outline.clone()),
             pixels: PixelCounts {
                 s1: obs.count(0),
                 s2: obs.count(1),

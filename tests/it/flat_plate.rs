@@ -109,6 +109,7 @@ proptest! {
                 aperture_center_mm: nalgebra::Point2::origin(),
                 pose: mfd::optics::station::Pose::default(),
                 wedge: mfd::optics::station::Wedge::NONE,
+                outline: mfd::optics::outline::Shape::Circle,
             },
         };
         let cam = mfd::optics::station::CameraProfile::load(&common::repo("hw/camera/baumer-txg12.toml")).unwrap();

@@ -53,6 +53,7 @@ mod input_ranges;
 mod measure_cli;
 mod measure_resume;
 mod measure_sim;
+mod outline;
 mod phase_shifting;
 mod plan_cli;
 mod plan_schedules;

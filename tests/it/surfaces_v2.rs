@@ -308,6 +308,7 @@ fn zernike_block_of_a_basis() {
             coefficients_nm: vec![0.0; 4],
             std_nm: Some(vec![0.0; 4]),
             expected_error_rms_nm: Some(0.0),
+            orthonormal_std_nm: None,
         }),
         SurfaceEntry::NotReconstructed { because: None },
     );

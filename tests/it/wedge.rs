@@ -12,7 +12,7 @@ use mfd::optics::station::{Screen, Station, Wedge};
 use mfd::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use nalgebra::{Point3, Unit, Vector3};
 
-mod chain;
+pub mod chain;
 mod soak;
 
 fn v2_with(element_lines: &str) -> String {

@@ -74,6 +74,7 @@ pub(super) fn entry(
                 coefficients_nm,
                 std_nm: raw.std_nm,
                 expected_error_rms_nm: raw.expected_error_rms_nm,
+                orthonormal_std_nm: raw.orthonormal_std_nm,
             };
             check_numbers(&c, name, path)?;
             Ok(SurfaceEntry::Reconstructed(c))

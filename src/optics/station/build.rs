@@ -249,6 +249,7 @@ impl SymmetricLayout {
             aperture_center_mm: Point2::origin(),
             pose: super::Pose::default(),
             wedge: super::Wedge::NONE,
+            outline: crate::optics::outline::Shape::Circle,
         }
     }
 

@@ -8,6 +8,11 @@ use serde::{Deserialize, Serialize};
 pub const STATION_FORMAT: &str = "mfd-station/1";
 /// The format tag of a version-2 station file (distortion, cover glass, pose).
 pub const STATION_FORMAT_V2: &str = "mfd-station/2";
+/// The format tag of a station file using the proposal
+/// `docs/proposals/outline.md` (the element's outline); not yet part of the
+/// interchange spec, written only when an outline other than the disk is
+/// given.
+pub const STATION_FORMAT_V3: &str = "mfd-station/3";
 /// The one distortion model version 2 names.
 pub const BROWN_CONRADY: &str = "brown-conrady";
 
@@ -148,4 +153,31 @@ pub struct ElementFile {
     /// degrees (version 2; default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wedge_azimuth_deg: Option<f64>,
+    /// `[element.outline]` (version 3, a proposal): the reported region
+    /// when it is not the aperture disk.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outline: Option<OutlineFile>,
+}
+
+/// `[element.outline]` (proposal `mfd-station/3`): a rectangle or a polygon.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutlineFile {
+    /// `"rectangle"` or `"polygon"`.
+    pub shape: String,
+    /// Rectangle: side lengths along the element's x and y before the
+    /// rotation, mm.
+    #[serde(
+        default,
+        deserialize_with = "crate::conventions::exact::option_array",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub sides_mm: Option<[f64; 2]>,
+    /// Rectangle: rotation about the aperture centre, degrees from +x
+    /// towards +y; default 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_deg: Option<f64>,
+    /// Polygon: the vertices `[x, y]` in the element's frame, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertices_mm: Option<Vec<[f64; 2]>>,
 }

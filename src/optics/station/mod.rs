@@ -12,6 +12,7 @@ mod cover_glass;
 mod distortion;
 mod dof;
 mod file;
+pub mod outline_check;
 mod pose;
 mod uncertainty;
 mod validate;
@@ -26,8 +27,8 @@ pub use cover_glass::CoverGlass;
 pub use distortion::Distortion;
 pub use dof::Dof;
 pub use file::{
-    CameraFile, CoverGlassFile, DistortionFile, ElementFile, ScreenFile, StationFile,
-    STATION_FORMAT, STATION_FORMAT_V2,
+    CameraFile, CoverGlassFile, DistortionFile, ElementFile, OutlineFile, ScreenFile, StationFile,
+    STATION_FORMAT, STATION_FORMAT_V2, STATION_FORMAT_V3,
 };
 pub use pose::Pose;
 pub use uncertainty::{StationUncertainty, UncertaintyError, UNCERTAINTY_FORMAT};
@@ -251,12 +252,25 @@ pub struct Element {
     pub pose: Pose,
     /// The wedge the plate was made with (station v2); none: parallel faces.
     pub wedge: Wedge,
+    /// The reported region's shape (proposal station v3); the disk unless
+    /// given. Its Zernike disk is the aperture's, which contains it.
+    pub outline: crate::optics::outline::Shape,
 }
 
 impl Element {
     /// The pose's pivot `c = (aperture_center_mm, 0)`.
     pub fn pivot(&self) -> Point3<f64> {
         Point3::new(self.aperture_center_mm.x, self.aperture_center_mm.y, 0.0)
+    }
+
+    /// The reported region in place: the shape about the aperture centre
+    /// in the aperture's Zernike disk.
+    pub fn outline(&self) -> crate::optics::outline::Outline {
+        crate::optics::outline::Outline::new(
+            self.outline.clone(),
+            self.centre(),
+            self.aperture_radius_mm,
+        )
     }
 
     /// The aperture centre `[x, y]`, mm: the Zernike centre of both faces.
@@ -372,6 +386,12 @@ impl Station {
         s
     }
 
+    /// Whether the proposal's outline is in use (the writer then writes
+    /// `mfd-station/3`).
+    pub fn needs_version_3(&self) -> bool {
+        !self.element.outline.is_circle()
+    }
+
     /// Whether any version-2 field is in use (the writer then writes
     /// `mfd-station/2`).
     pub fn needs_version_2(&self) -> bool {
@@ -396,7 +416,9 @@ impl Station {
         let v2 = self.needs_version_2();
         let pose = &self.element.pose;
         StationFile {
-            format: if v2 {
+            format: if self.needs_version_3() {
+                STATION_FORMAT_V3
+            } else if v2 {
                 STATION_FORMAT_V2
             } else {
                 STATION_FORMAT
@@ -439,6 +461,7 @@ impl Station {
                 wedge_arcmin: (!self.element.wedge.is_none()).then_some(self.element.wedge.arcmin),
                 wedge_azimuth_deg: (!self.element.wedge.is_none())
                     .then_some(self.element.wedge.azimuth_deg),
+                outline: outline_check::to_file(&self.element.outline),
             },
         }
     }

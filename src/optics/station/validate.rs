@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 use super::file::BROWN_CONRADY;
 use super::{
     Camera, CoverGlass, Distortion, Element, ElementFile, Pose, Screen, Station, StationError,
-    StationFile, Wedge, MAX_WEDGE_ARCMIN, STATION_FORMAT, STATION_FORMAT_V2,
+    StationFile, Wedge, MAX_WEDGE_ARCMIN, STATION_FORMAT, STATION_FORMAT_V2, STATION_FORMAT_V3,
 };
 
 /// Tolerance on orthonormality of the rotation and of the screen axes.
@@ -126,11 +126,12 @@ impl Check<'_> {
 
 pub(super) fn station(file: &StationFile, path: &Path) -> Result<Station, StationError> {
     let check = Check { path };
-    if file.format != STATION_FORMAT && file.format != STATION_FORMAT_V2 {
+    if ![STATION_FORMAT, STATION_FORMAT_V2, STATION_FORMAT_V3].contains(&file.format.as_str()) {
         return check.fail(
             "format",
             format!(
-                "expected \"{STATION_FORMAT}\" or \"{STATION_FORMAT_V2}\", found \"{}\"",
+                "expected \"{STATION_FORMAT}\", \"{STATION_FORMAT_V2}\" or the proposal \
+                 \"{STATION_FORMAT_V3}\", found \"{}\"",
                 file.format
             ),
         );
@@ -394,6 +395,7 @@ fn element(check: &Check, file: &StationFile) -> Result<Element, StationError> {
         );
     }
     let wedge = wedge(check, e)?;
+    let outline = super::outline_check::shape(check.path, &file.format, e, centre)?;
     Ok(Element {
         refractive_index: e.refractive_index,
         thickness_mm: e.thickness_mm,
@@ -404,6 +406,7 @@ fn element(check: &Check, file: &StationFile) -> Result<Element, StationError> {
             tilt_deg: tilt,
         },
         wedge,
+        outline,
     })
 }
 

@@ -7,12 +7,12 @@
 mod intersect;
 mod paths;
 
-use nalgebra::Point2;
 use rayon::prelude::*;
 
 pub use intersect::{intersect, surface_normal, IntersectFailure, SurfaceHit, INTERSECT_TOL_MM};
 pub use paths::{to_screen, Miss, PathOutcome, PixelPaths, ScreenHit};
 
+use crate::optics::outline::Outline;
 use crate::optics::station::Station;
 use crate::optics::zernike::ZernikeSurface;
 
@@ -32,10 +32,11 @@ pub struct Plate {
     pub refractive_index: f64,
     /// Nominal thickness, mm.
     pub thickness_mm: f64,
-    /// Radius of the physical rim, mm: a path touching a surface beyond it is lost.
-    pub edge_radius_mm: f64,
-    /// Centre of the rim `(x, y)`, mm.
-    pub edge_center_mm: Point2<f64>,
+    /// The reported outline (the element's disk, rectangle or polygon).
+    pub outline: Outline,
+    /// How far the physical rim lies beyond the outline, mm: a path
+    /// touching a surface beyond it is lost.
+    pub edge_margin_mm: f64,
 }
 
 impl Plate {
@@ -53,9 +54,20 @@ impl Plate {
             back,
             refractive_index: e.refractive_index,
             thickness_mm: e.thickness_mm,
-            edge_radius_mm: e.aperture_radius_mm + edge_margin_mm,
-            edge_center_mm: e.aperture_center_mm,
+            outline: e.outline(),
+            edge_margin_mm,
         }
+    }
+
+    /// Whether `(x, y)` (element frame, mm) lies beyond the physical rim.
+    pub fn outside_edge_xy(&self, x: f64, y: f64) -> bool {
+        if self.outline.vertices().is_some() {
+            return self.outline.outside_by_mm(x, y) > self.edge_margin_mm;
+        }
+        // The disk without a root, as the tracer did before outlines.
+        let [cx, cy] = self.outline.centre_mm;
+        let r = self.outline.radius_mm + self.edge_margin_mm;
+        (x - cx).powi(2) + (y - cy).powi(2) > r * r
     }
 }
 

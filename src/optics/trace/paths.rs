@@ -125,9 +125,7 @@ impl Plate {
     }
 
     fn outside_edge(&self, p: &Point3<f64>) -> bool {
-        let dx = p.x - self.edge_center_mm.x;
-        let dy = p.y - self.edge_center_mm.y;
-        dx * dx + dy * dy > self.edge_radius_mm * self.edge_radius_mm
+        self.outside_edge_xy(p.x, p.y)
     }
 
     /// Traces all three paths of the ray from `camera` along `d`.
@@ -143,11 +141,7 @@ impl Plate {
             return none;
         }
         let on_plane = camera + (-camera.z / d.z) * d.as_ref();
-        let (dx, dy) = (
-            on_plane.x - self.edge_center_mm.x,
-            on_plane.y - self.edge_center_mm.y,
-        );
-        if (dx * dx + dy * dy).sqrt() > self.edge_radius_mm + 1.0 {
+        if self.outline.outside_by_mm(on_plane.x, on_plane.y) > self.edge_margin_mm + 1.0 {
             return none;
         }
         let m1 = match self.hit(camera, d, false) {

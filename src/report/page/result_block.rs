@@ -266,7 +266,7 @@ fn maps(page: &mut Page, f: &Figures, dir: &Path, scratch: &Path) -> Result<(), 
     let Ok(surface) = ZernikeSurface::new(basis, d) else {
         return Ok(());
     };
-    let tv = height_grid(&surface, MAP_SIDE);
+    let tv = height_grid(&surface, &s.outline_in_place(), MAP_SIDE);
     let twe: Vec<f64> = tv.iter().map(|v| v * (p.refractive_index - 1.0)).collect();
     let extent = Extent {
         x_mm: (cx - r, cx + r),

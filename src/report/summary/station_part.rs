@@ -3,6 +3,8 @@
 //! surface), and the degrees of freedom that contribute most.
 
 use nalgebra::DMatrix;
+
+use crate::optics::outline::Outline;
 use serde::{Deserialize, Serialize};
 
 use super::{Summary, UNCERTAINTY_WITH_STATION};
@@ -76,20 +78,22 @@ impl Summary {
     /// The summary with the station's part from `budget` (of the same
     /// solution) beside the noise's.
     pub fn with_budget(mut self, budget: &Budget) -> Summary {
-        let front = split(&self.front, budget, false);
+        let over = self.over.clone();
+        let over = over.as_ref();
+        let front = split(&self.front, budget, false, over);
         let back = self
             .back
             .as_ref()
             .filter(|_| budget.back_fitted)
-            .map(|b| split(b, budget, true));
+            .map(|b| split(b, budget, true, over));
         let total = |s: Option<&ErrorSplit>| s.map_or(0.0, |s| s.total_rms_nm);
         let (tf, tb) = (total(Some(&front)), total(back.as_ref()));
         let mut largest: Vec<Share> = budget
             .dofs
             .iter()
             .map(|d| {
-                let f = rms_from_defocus(&d.front_contribution_nm());
-                let b = rms_from_defocus(&d.back_contribution_nm());
+                let f = rms_over(&d.front_contribution_nm(), over);
+                let b = rms_over(&d.back_contribution_nm(), over);
                 Share {
                     name: d.dof.name().into(),
                     std: d.std,
@@ -118,7 +122,12 @@ impl Summary {
 /// One surface's split: the noise from its figures, the station's
 /// `S C Sᵀ` from the budget's degrees of freedom, the total from the
 /// budget's total covariance.
-fn split(noise: &SurfaceFigures, budget: &Budget, back: bool) -> ErrorSplit {
+fn split(
+    noise: &SurfaceFigures,
+    budget: &Budget,
+    back: bool,
+    over: Option<&Outline>,
+) -> ErrorSplit {
     let n = noise.std_nm.len();
     let per_sigma = |d: &DofEntry| {
         if back {
@@ -148,13 +157,27 @@ fn split(noise: &SurfaceFigures, budget: &Budget, back: bool) -> ErrorSplit {
             .collect()
     };
     let (station_std_nm, total_std_nm) = (diag(&station), diag(total));
+    // Over an outline other than the disk, through its orthonormal set.
+    let expected = |c: &DMatrix<f64>, std: &[f64]| match over.map(|o| o.orthonormal(n)) {
+        Some(Ok(q)) if !q.is_identity() => q.expected_rms(c, REMOVED_TERMS),
+        _ => rms_from_defocus(std),
+    };
     ErrorSplit {
         noise_rms_nm: noise.error_rms_nm,
-        station_rms_nm: rms_from_defocus(&station_std_nm),
-        total_rms_nm: rms_from_defocus(&total_std_nm),
+        station_rms_nm: expected(&station, &station_std_nm),
+        total_rms_nm: expected(total, &total_std_nm),
         noise_std_nm: noise.std_nm.clone(),
         station_std_nm,
         total_std_nm,
+    }
+}
+
+/// The RMS over the outline (the plane removed) of the coefficient
+/// shifts `v`: [`rms_from_defocus`] for the disk.
+fn rms_over(v: &[f64], over: Option<&Outline>) -> f64 {
+    match over.map(|o| o.orthonormal(v.len())) {
+        Some(Ok(q)) if !q.is_identity() => q.rms(v, REMOVED_TERMS),
+        _ => rms_from_defocus(v),
     }
 }
 

@@ -149,8 +149,7 @@ fn hit<const N: usize>(
     let dir = Unit::new_unchecked(Vector3::from(dv));
     let h = intersect(&origin, &dir, surface, z0)?;
     let p0 = h.point;
-    let (ex, ey) = (p0.x - plate.edge_center_mm.x, p0.y - plate.edge_center_mm.y);
-    if ex * ex + ey * ey > plate.edge_radius_mm * plate.edge_radius_mm {
+    if plate.outside_edge_xy(p0.x, p0.y) {
         return Err(Miss::LeavesEdge {
             surface: u8::from(back),
         });

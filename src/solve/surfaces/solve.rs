@@ -81,6 +81,8 @@ pub struct Stage {
 /// The reconstructed surfaces with their uncertainty.
 #[derive(Debug, Clone)]
 pub struct SurfaceSolution {
+    /// The element's outline: every figure is taken over it.
+    pub outline: crate::optics::outline::Outline,
     /// Front surface (piston 0: the reference plane).
     pub front: ZernikeSurface,
     /// Back surface (departure from `z = −thickness`); flat and not
@@ -117,6 +119,36 @@ pub struct SurfaceSolution {
     pub condition_number: f64,
 }
 
+/// `opts` with `max_terms` lowered to the full radial orders the element's
+/// outline supports (a narrow outline makes high orders dependent over it:
+/// `optics::outline::orthonormal`).
+///
+/// # Errors
+/// [`SurfaceError::Input`] naming `element.outline` when fixed `terms` or
+/// even the plane are beyond it.
+fn outline_terms(station: &Station, opts: &SurfaceOptions) -> Result<SurfaceOptions, SurfaceError> {
+    let outline = station.element.outline();
+    let refuse = |e: crate::optics::outline::OutlineError| SurfaceError::Input {
+        what: "element.outline",
+        problem: e.to_string(),
+    };
+    match opts.terms {
+        Some(t) => outline
+            .orthonormal(t.max(3))
+            .map(|_| opts.clone())
+            .map_err(refuse),
+        None => {
+            let most = outline
+                .supported_terms(opts.max_terms.max(3))
+                .map_err(refuse)?;
+            Ok(SurfaceOptions {
+                max_terms: most,
+                ..opts.clone()
+            })
+        }
+    }
+}
+
 /// Runs every stage on `obs`: the front from its slopes, the back on S2,
 /// the joint fit, outliers out and refit, the term choice and its refit.
 /// (About 80 lines: the sequence of stages, each one call, reads best
@@ -132,6 +164,9 @@ pub fn reconstruct(
     // Everything is fitted in the element's own frame (station v2's pose);
     // `obs` were built in it by `Observations::from_maps`.
     let station = &station.element_frame();
+    // An outline too narrow for the terms asked: the choice stops at the
+    // orders it supports; terms fixed by the user are refused, named.
+    let opts = &outline_terms(station, opts)?;
     let weighted = opts.weighted(obs);
     let obs = &*weighted;
     let (terms, mut plate, mut stages) = front_stage(obs, station, opts)?;
@@ -424,6 +459,7 @@ fn finish(
     let front_std_nm = std_of(layout.front_terms, &|k| layout.front_col(k));
     let back_std_nm = std_of(layout.back_terms, &|k| layout.back_col(k));
     Ok(SurfaceSolution {
+        outline: plate.outline.clone(),
         front: plate.front,
         back: plate.back,
         back_fitted: layout.fit_back,

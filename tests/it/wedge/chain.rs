@@ -93,6 +93,12 @@ pub struct Outcome {
     pub withheld: [Option<String>; 2],
 }
 
+/// What [`run_solved`] gives beside the scores: the solution and the truth.
+pub struct Solved {
+    pub solution: mfd::solve::surfaces::SurfaceSolution,
+    pub truth: [ZernikeSurface; 2],
+}
+
 /// Renders the scene into `dir`, reconstructs it on the declared station,
 /// and scores it (with the bound when `with_bound`); `Err` with the
 /// message where the pipeline or its surface stage refused.
@@ -101,6 +107,15 @@ pub fn run_scored(
     dir: &std::path::Path,
     with_bound: bool,
 ) -> Result<Outcome, String> {
+    run_solved(scene, dir, with_bound).map(|(o, _)| o)
+}
+
+/// [`run_scored`], with the solution and the truth.
+pub fn run_solved(
+    scene: &Scene,
+    dir: &std::path::Path,
+    with_bound: bool,
+) -> Result<(Outcome, Solved), String> {
     let st = &scene.truth;
     let e = &st.element;
     let spec = RandomSurfaceSpec {
@@ -152,6 +167,10 @@ pub fn run_scored(
         &mut |_, _| {},
     )
     .map_err(|e: PipelineError| e.to_string())?;
+    // The result folder as `mfd reconstruct` writes it (its files are checked
+    // where a test needs them).
+    rec.write(&dir.join("result"))
+        .map_err(|e| format!("writing the result: {e}"))?;
     let spectral = rec.spectral.as_ref().unwrap();
     let wedge_note = spectral.wedge.map(|w| w.describe());
     let used_found = spectral.wedge.is_some_and(|w| w.used_found);
@@ -168,10 +187,11 @@ pub fn run_scored(
         let zs: Vec<f64> = (REMOVED_TERMS..n).map(|k| (c[k] - t[k]) / std[k]).collect();
         (zs.iter().map(|z| z * z).sum::<f64>() / zs.len() as f64).sqrt()
     };
-    Ok(Outcome {
+    let outcome = Outcome {
+        // Over the element's outline (for the disk, the Noll 4+ RMS).
         error: [
-            rms_difference_nm(sol.front.coefficients_nm(), front.coefficients_nm()),
-            rms_difference_nm(sol.back.coefficients_nm(), back.coefficients_nm()),
+            over_outline(st, sol.front.coefficients_nm(), front.coefficients_nm()),
+            over_outline(st, sol.back.coefficients_nm(), back.coefficients_nm()),
         ],
         bound,
         reported: [
@@ -191,7 +211,27 @@ pub fn run_scored(
                 .clone()
                 .or_else(|| (!sol.back_fitted).then(|| "back not fitted".to_string())),
         ],
-    })
+    };
+    Ok((
+        outcome,
+        Solved {
+            solution: stage.solution.clone(),
+            truth: [front, back],
+        },
+    ))
+}
+
+/// The RMS over `st`'s outline of `fit − truth`, the plane removed, nm
+/// ([`rms_difference_nm`] for the disk).
+pub fn over_outline(st: &Station, fit: &[f64], truth: &[f64]) -> f64 {
+    let n = fit.len().max(truth.len());
+    let d: Vec<f64> = (0..n)
+        .map(|k| fit.get(k).copied().unwrap_or(0.0) - truth.get(k).copied().unwrap_or(0.0))
+        .collect();
+    match st.element.outline().orthonormal(n) {
+        Ok(q) if !q.is_identity() => q.rms(&d, REMOVED_TERMS),
+        _ => rms_difference_nm(fit, truth),
+    }
 }
 
 /// [`run_scored`] with the bound.
