@@ -155,17 +155,22 @@ impl Outline {
     /// # Errors
     /// [`OutlineError`] when not even the plane is independent over it.
     pub fn supported_terms(&self, max: usize) -> Result<usize, OutlineError> {
-        match self.orthonormal(max) {
-            Ok(_) => Ok(max),
-            Err(OutlineError::TooNarrow { term, .. }) if term > 3 => {
-                let full = (1..)
-                    .map(crate::optics::zernike::terms_up_to_order)
-                    .take_while(|&t| t < term)
-                    .last()
-                    .unwrap_or(3);
-                self.orthonormal(full).map(|_| full)
+        let mut t = max;
+        loop {
+            match self.orthonormal(t) {
+                Ok(_) => return Ok(t),
+                // Near the edge of f64 the first dependent term moves with
+                // the quadrature's size: try again with the orders below it.
+                Err(OutlineError::TooNarrow { term, .. }) if term > 3 && t > 3 => {
+                    t = (1..)
+                        .map(crate::optics::zernike::terms_up_to_order)
+                        .take_while(|&n| n < term.min(t))
+                        .last()
+                        .unwrap_or(3)
+                        .max(3);
+                }
+                Err(e) => return Err(e),
             }
-            Err(e) => Err(e),
         }
     }
 }

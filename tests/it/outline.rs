@@ -159,11 +159,7 @@ fn a_square_element_is_reconstructed_over_the_square_at_the_bound() {
     let outline = st.element.outline();
     let sol = &solved.solution;
     for (k, face) in ["front", "back"].into_iter().enumerate() {
-        let (fit, truth) = if k == 0 {
-            (&sol.front, &solved.truth[0])
-        } else {
-            (&sol.back, &solved.truth[1])
-        };
+        let truth = &solved.truth[k];
         let f = figures(sol, k == 1);
         let error = o.error[k];
         let bound = o.bound.unwrap()[k];

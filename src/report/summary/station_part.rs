@@ -165,7 +165,8 @@ fn split(
     ErrorSplit {
         noise_rms_nm: noise.error_rms_nm,
         station_rms_nm: expected(&station, &station_std_nm),
-        total_rms_nm: expected(total, &total_std_nm),
+        // The truncation's part is the model's, beside noise and station.
+        total_rms_nm: expected(total, &total_std_nm).hypot(noise.truncation_rms_nm),
         noise_std_nm: noise.std_nm.clone(),
         station_std_nm,
         total_std_nm,

@@ -28,10 +28,15 @@ pub struct SurfaceFigures {
     pub rms_nm: f64,
     /// σ of `rms_nm` from the coefficient covariance (delta method), nm.
     pub rms_std_nm: f64,
-    /// Expected RMS over the outline of the surface error from the noise,
-    /// the plane removed, nm: the surface's uncertainty as one number (for
-    /// the disk `sqrt(Σ_{j≥4} σ_j²)`).
+    /// Expected RMS over the outline of the surface error, the plane
+    /// removed, nm: the surface's uncertainty as one number: the noise's
+    /// (for the disk `sqrt(Σ_{j≥4} σ_j²)`) and the truncation's
+    /// ([`SurfaceFigures::truncation_rms_nm`]) in quadrature.
     pub error_rms_nm: f64,
+    /// The part of `error_rms_nm` from terms the criterion dropped, nm:
+    /// what the largest model saw in them (0 when none were dropped).
+    #[serde(default)]
+    pub truncation_rms_nm: f64,
     /// Peak-to-valley over the height grid inside the outline, the plane
     /// removed, nm.
     pub pv_nm: f64,
@@ -120,6 +125,7 @@ pub fn figures(sol: &SurfaceSolution, back: bool) -> SurfaceFigures {
             rms_nm: f64::NAN,
             rms_std_nm: f64::NAN,
             error_rms_nm: f64::NAN,
+            truncation_rms_nm: f64::NAN,
             pv_nm: f64::NAN,
             coefficients_nm: c.to_vec(),
             std_nm: std.clone(),
@@ -143,7 +149,16 @@ pub fn figures(sol: &SurfaceSolution, back: bool) -> SurfaceFigures {
     } else {
         0.0
     };
-    let error_rms = q.expected_rms(&cov, REMOVED_TERMS);
+    // The noise's part, and the truncation's where the criterion dropped
+    // terms the largest model saw (`select::dropped_rms_nm`).
+    let truncation = sol.choice.as_ref().map_or(0.0, |c| {
+        if back {
+            c.back.as_ref().map_or(0.0, |b| b.dropped_rms_nm)
+        } else {
+            c.front.dropped_rms_nm
+        }
+    });
+    let error_rms = q.expected_rms(&cov, REMOVED_TERMS).hypot(truncation);
     let grid = height_grid(surface, &sol.outline, 256);
     let (lo, hi) = grid
         .iter()
@@ -156,6 +171,7 @@ pub fn figures(sol: &SurfaceSolution, back: bool) -> SurfaceFigures {
         rms_nm: rms,
         rms_std_nm: rms_std,
         error_rms_nm: error_rms,
+        truncation_rms_nm: truncation,
         pv_nm: if hi >= lo { hi - lo } else { f64::NAN },
         coefficients_nm: c.to_vec(),
         std_nm: std.clone(),

@@ -12,7 +12,10 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::problem::{Layout, Normal};
+use crate::optics::station::Station;
+use crate::optics::trace::Plate;
 use crate::optics::zernike::terms_up_to_order;
+use crate::optics::zernike::ZernikeSurface;
 
 /// The criterion in words, for reports (`summary.json`).
 pub const CRITERION: &str = "BIC = chi2 + p ln N over nested Noll orders (N ln(chi2/N) + p ln N \
@@ -25,6 +28,45 @@ pub struct TermChoice {
     pub terms: usize,
     /// `(terms, BIC)` of every candidate.
     pub candidates: Vec<(usize, f64)>,
+    /// The RMS over the element's outline of what the dropped terms hold,
+    /// as the largest model estimates it, nm ([`dropped_rms_nm`]): the
+    /// truncation's part of the expected error, 0 when nothing is dropped.
+    pub dropped_rms_nm: f64,
+}
+
+/// The RMS over `outline` (plane removed) that the terms beyond `keep`
+/// of the largest model's surface `c` may hold, with that model's
+/// covariance `cov` of `c` (nm²). In the set orthonormal over the outline
+/// the dropped energy `Σ_{k ≥ keep} a_k²` is estimated without bias by
+/// `U = Σ (â_k² − σ_k²)` (`E[â²] = a² + σ²`), whose spread is
+/// `sd(U)² = Σ (2σ_k⁴ + 4 a_k² σ_k²)`; the truncation reported is
+/// `√(max(U, 0) + sd(U))`: what the dropped terms hold, or, where the data
+/// cannot see them, what they cannot rule out (a surface cut to its plane
+/// by the criterion would otherwise claim no error at all). The model
+/// error that a choice of fewer terms leaves and that no σ of the kept
+/// terms shows (the spec's "model error the program estimates").
+pub fn dropped_rms_nm(
+    outline: &crate::optics::outline::Outline,
+    c: &[f64],
+    cov: &DMatrix<f64>,
+    keep: usize,
+) -> f64 {
+    if keep >= c.len() {
+        return 0.0;
+    }
+    let Ok(q) = outline.orthonormal(c.len()) else {
+        return 0.0;
+    };
+    let a = q.coefficients(c);
+    let s = q.covariance(cov);
+    let (mut u, mut var) = (0.0, 0.0);
+    for k in keep..a.len() {
+        let v = s[(k, k)].max(0.0);
+        let seen = a[k] * a[k] - v;
+        u += seen;
+        var += 2.0 * v * v + 4.0 * seen.max(0.0) * v;
+    }
+    (u.max(0.0) + var.sqrt()).sqrt()
 }
 
 /// Candidate term counts: every full radial order below `max`, and `max`.
@@ -92,5 +134,46 @@ pub fn choose_terms(
     Some(TermChoice {
         terms: best,
         candidates,
+        dropped_rms_nm: 0.0,
     })
+}
+
+/// Each choice's [`TermChoice::dropped_rms_nm`], from the largest model's
+/// surfaces and covariance (`normal`, scaled as the solution's covariance is).
+pub(super) fn dropped(
+    plate: &Plate,
+    layout: &Layout,
+    normal: &Normal,
+    station: &Station,
+    sigma_known: bool,
+    f: &mut TermChoice,
+    b: Option<&mut TermChoice>,
+) {
+    let Some(inv) = normal.a.clone().try_inverse() else {
+        return;
+    };
+    let red = normal.chi2 / normal.n_resid.saturating_sub(layout.columns()).max(1) as f64;
+    let scale = if sigma_known { red.max(1.0) } else { red };
+    let outline = station.element.outline();
+    let one = |surface: &ZernikeSurface, n: usize, col: &dyn Fn(usize) -> Option<usize>, keep| {
+        let cov = DMatrix::from_fn(n, n, |i, j| match (col(i), col(j)) {
+            (Some(a), Some(b)) => inv[(a, b)] * scale,
+            _ => 0.0,
+        });
+        dropped_rms_nm(&outline, surface.coefficients_nm(), &cov, keep)
+    };
+    f.dropped_rms_nm = one(
+        &plate.front,
+        layout.front_terms,
+        &|k| layout.front_col(k),
+        f.terms,
+    );
+    if let Some(b) = b {
+        b.dropped_rms_nm = one(
+            &plate.back,
+            layout.back_terms,
+            &|k| layout.back_col(k),
+            b.terms,
+        );
+    }
 }

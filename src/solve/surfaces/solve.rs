@@ -10,7 +10,7 @@ use super::lm::{levenberg_marquardt, LmOptions, LmReport};
 use super::outliers::{outliers, without};
 pub use super::outliers::{OUTLIER_CHI2, OUTLIER_RULE};
 use super::problem::{Layout, Normal, Observations};
-use super::select::{choose_terms, TermChoice};
+use super::select::{self, choose_terms, TermChoice};
 use super::SurfaceError;
 use crate::optics::station::Station;
 use crate::optics::trace::Plate;
@@ -306,6 +306,16 @@ fn refit_chosen_terms(
     } else {
         None
     };
+    let (mut f, mut b) = (f, b);
+    select::dropped(
+        plate,
+        layout,
+        normal,
+        station,
+        obs.sigma_known,
+        &mut f,
+        b.as_mut(),
+    );
     // Without a fitted back the back stays the nominal one, carried with
     // the front's count.
     let back_terms = b.as_ref().map_or(f.terms, |b| b.terms);
