@@ -158,6 +158,45 @@ pub struct FigureInput<'a> {
     pub covariance_note: String,
     /// Why the front (0) or back (1) is not reported, where it is not.
     pub withheld: [Option<String>; 2],
+    /// Where the element's outline is not the disk: the coefficients and
+    /// covariance above are in the set orthonormal over it ([`Over`]), and
+    /// every figure is taken over the outline.
+    pub over: Option<&'a Over>,
+}
+
+/// The set orthonormal over an element's outline that a [`FigureInput`]'s
+/// coefficients are in: PV on the grid's cells inside the outline, RMS
+/// from the coefficients from the fourth (the plane over the outline
+/// removed), the wedge from the plane over the outline.
+#[derive(Debug, Clone)]
+pub struct Over {
+    /// The outline.
+    pub outline: crate::optics::outline::Outline,
+    /// The set (as many terms as the longer face).
+    pub set: crate::optics::outline::Orthonormal,
+}
+
+impl Over {
+    /// The Zernike plane (Noll 1–3) of orthonormal coefficients `a`: the
+    /// first three of `L⁻ᵀ a` (upper triangular, so only `a_1…a_3` enter).
+    fn zernike_plane(&self, a: &[f64]) -> Vec<f64> {
+        let lt = self.set.matrix();
+        let n = 3.min(lt.nrows()).min(a.len());
+        let mut c = vec![0.0; n];
+        for i in (0..n).rev() {
+            let s: f64 = (i + 1..n).map(|j| lt[(i, j)] * c[j]).sum();
+            c[i] = (a[i] - s) / lt[(i, i)];
+        }
+        c
+    }
+}
+
+/// The wedge of `d = W1 − W2` in `input`'s coefficients (see [`wedge`]).
+pub(crate) fn wedge_of(d: &[f64], input: &FigureInput<'_>) -> (f64, f64) {
+    match input.over {
+        None => wedge(d, input.radius_mm),
+        Some(o) => wedge(&o.zernike_plane(d), input.radius_mm),
+    }
 }
 
 /// The closed-form figures of one face's coefficients `c` (nm): power,
@@ -204,11 +243,11 @@ pub fn wedge(d: &[f64], radius_mm: f64) -> (f64, f64) {
     (angle, azimuth)
 }
 
-/// The plate's closed-form figures: wedge (arcsec), azimuth (deg),
-/// thickness variation PV and RMS (nm).
-pub fn plate_values(front: &[f64], back: &[f64], radius_mm: f64, grid: &Grid) -> [f64; 4] {
-    let d = difference(front, back);
-    let (w, az) = wedge(&d, radius_mm);
+/// The plate's closed-form figures of `input`: wedge (arcsec), azimuth
+/// (deg), thickness variation PV and RMS (nm).
+pub fn plate_values(input: &FigureInput<'_>, grid: &Grid) -> [f64; 4] {
+    let d = difference(input.front_nm, input.back_nm);
+    let (w, az) = wedge_of(&d, input);
     let rms = d.iter().skip(3).map(|x| x * x).sum::<f64>().sqrt();
     [w, az, grid.pv(&d, 3), rms]
 }
@@ -219,7 +258,10 @@ pub fn plate_values(front: &[f64], back: &[f64], radius_mm: f64, grid: &Grid) ->
 /// [`ZernikeError`] when the Zernike radius is not positive and finite.
 pub fn figures(input: &FigureInput<'_>) -> Result<Figures, ZernikeError> {
     let terms = input.front_nm.len().max(input.back_nm.len()).max(4);
-    let grid = Grid::new(terms, input.radius_mm, GRID_SIDE)?;
+    let grid = match input.over {
+        None => Grid::new(terms, input.radius_mm, GRID_SIDE)?,
+        Some(o) => Grid::over(&o.outline, &o.set, GRID_SIDE)?,
+    };
     let spread = draws::spread(input, &grid);
     let face = |k: usize| -> Option<FaceFigures> {
         if input.withheld[k].is_some() {
@@ -256,7 +298,7 @@ pub fn figures(input: &FigureInput<'_>) -> Result<Figures, ZernikeError> {
     };
     let (front, back) = (face(0), face(1));
     let plate = (front.is_some() && back.is_some()).then(|| {
-        let v = plate_values(input.front_nm, input.back_nm, input.radius_mm, &grid);
+        let v = plate_values(input, &grid);
         let s = spread.plate;
         let n1 = input.refractive_index - 1.0;
         PlateFigures {
@@ -301,7 +343,8 @@ pub fn figures(input: &FigureInput<'_>) -> Result<Figures, ZernikeError> {
 fn std_methods() -> BTreeMap<String, String> {
     let drawn = format!(
         "draws {DRAWS} (seed {DRAWS_SEED}) from the joint covariance of front and back; \
-         PV on a {GRID_SIDE} x {GRID_SIDE} grid over the aperture"
+         PV on a {GRID_SIDE} x {GRID_SIDE} grid over the aperture (its cells inside the \
+         element's outline)"
     );
     let mut m = BTreeMap::new();
     m.insert("power_std_nm".into(), "linear".into());
@@ -346,5 +389,6 @@ pub fn of_truth(
         wavelength_nm,
         covariance_note: "none: known coefficients".into(),
         withheld: [None, None],
+        over: None,
     })
 }

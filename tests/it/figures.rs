@@ -275,6 +275,7 @@ fn figures_of(front: &[f64], back: &[f64], cov: &DMatrix<f64>) -> Figures {
         wavelength_nm: 1053.0,
         covariance_note: "test".into(),
         withheld: [None, None],
+        over: None,
     })
     .unwrap()
 }
@@ -386,6 +387,7 @@ fn a_withheld_face_leaves_its_figures_and_the_plates_null_with_the_reason() {
         wavelength_nm: 1053.0,
         covariance_note: "test".into(),
         withheld: [None, Some("no back reflection".into())],
+        over: None,
     })
     .unwrap();
     assert!(withheld.back.is_none() && withheld.plate.is_none());

@@ -220,6 +220,17 @@ fn a_square_element_is_reconstructed_over_the_square_at_the_bound() {
     assert_eq!(file.outline.as_ref(), Some(&outline.shape));
     let summary = std::fs::read_to_string(dir.path().join("result/summary.json")).unwrap();
     assert!(summary.contains("orthonormal_nm"), "{summary}");
+    // The optician's figures (ISO 10110-5 RMSt) are over the square too:
+    // the same number as the surface's RMS, not the disk's.
+    let v: serde_json::Value = serde_json::from_str(&summary).unwrap();
+    for face in ["front", "back"] {
+        let rms_t = v["figures"][face]["rms_t_nm"].as_f64().unwrap();
+        let rms = v[face]["rms_nm"].as_f64().unwrap();
+        assert!(
+            (rms_t - rms).abs() <= 1e-9 * rms,
+            "{face}: RMSt {rms_t} against {rms}"
+        );
+    }
 }
 
 #[test]

@@ -6,7 +6,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use super::{difference, face_rms, wedge, FigureInput, Grid, DRAWS, DRAWS_SEED};
+use super::{difference, face_rms, wedge_of, FigureInput, Grid, DRAWS, DRAWS_SEED};
 
 /// Draws evaluated per batch of PV grids (bounds the memory of one batch).
 const BATCH: usize = 50;
@@ -63,7 +63,7 @@ pub(super) fn spread(input: &FigureInput<'_>, grid: &Grid) -> Spread {
                     col[(k, d)] = *x;
                 }
             }
-            let (w, az) = wedge(&diff, input.radius_mm);
+            let (w, az) = wedge_of(&diff, input);
             let rms = diff.iter().skip(3).map(|x| x * x).sum::<f64>().sqrt();
             plate.push([w, az, 0.0, rms]);
             for (k, v) in [&f, &b].into_iter().enumerate() {
@@ -83,7 +83,7 @@ pub(super) fn spread(input: &FigureInput<'_>, grid: &Grid) -> Spread {
         }
         done += m;
     }
-    let (_, azimuth) = wedge(&difference(input.front_nm, input.back_nm), input.radius_mm);
+    let (_, azimuth) = wedge_of(&difference(input.front_nm, input.back_nm), input);
     Spread {
         face: [columns_std(&faces[0], None), columns_std(&faces[1], None)],
         plate: columns_std(&plate, Some((1, azimuth))),

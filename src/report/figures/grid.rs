@@ -40,6 +40,47 @@ impl Grid {
         })
     }
 
+    /// The polynomials orthonormal over `outline` (`set`) at the centres
+    /// of the `side × side` cells of its Zernike disk's bounding square
+    /// that lie inside the outline: `Q = L⁻¹ Z`, so the PV of a surface is
+    /// taken from its orthonormal coefficients, its first terms (the plane
+    /// over the outline) left out.
+    ///
+    /// # Errors
+    /// [`ZernikeError`] for a radius that is not positive and finite.
+    pub fn over(
+        outline: &crate::optics::outline::Outline,
+        set: &crate::optics::outline::Orthonormal,
+        side: usize,
+    ) -> Result<Grid, ZernikeError> {
+        let terms = set.terms();
+        let (r, [cx, cy]) = (outline.radius_mm, outline.centre_mm);
+        let basis = ZernikeBasis::new(terms, r, [cx, cy])?;
+        let step = 2.0 * r / side as f64;
+        let mut rows: Vec<f64> = Vec::new();
+        let mut z = vec![0.0; terms];
+        let mut points = 0;
+        for row in 0..side {
+            let y = cy + r - (row as f64 + 0.5) * step;
+            for col in 0..side {
+                let x = cx - r + (col as f64 + 0.5) * step;
+                if outline.contains(x, y) {
+                    basis.eval_values_into(x, y, &mut z)?;
+                    rows.extend_from_slice(&z);
+                    points += 1;
+                }
+            }
+        }
+        let zs = DMatrix::from_row_slice(points, terms, &rows);
+        // Rows of Q values: z_row L⁻ᵀ, i.e. solve (Lᵀ)ᵀ-wise: Q = Z (Lᵀ)⁻¹.
+        let inv = set
+            .matrix()
+            .clone()
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::identity(terms, terms));
+        Ok(Grid { values: zs * inv })
+    }
+
     /// Terms per point.
     pub fn terms(&self) -> usize {
         self.values.ncols()

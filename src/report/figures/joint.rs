@@ -6,7 +6,7 @@
 
 use nalgebra::DMatrix;
 
-use super::{figures, FigureInput, Figures};
+use super::{figures, FigureInput, Figures, Over};
 use crate::budget::Budget;
 use crate::optics::station::Station;
 use crate::solve::surfaces::SurfaceSolution;
@@ -71,9 +71,48 @@ pub fn of_solution(
     let back_why = withheld[1]
         .clone()
         .or_else(|| (!sol.back_fitted).then(|| NO_BACK.to_string()));
+    // Over an outline other than the disk: coefficients and covariance in
+    // the set orthonormal over it (`Over`).
+    let (nf, nb) = (
+        sol.front.coefficients_nm().len(),
+        sol.back.coefficients_nm().len(),
+    );
+    let over = sol
+        .outline
+        .orthonormal(nf.max(nb))
+        .ok()
+        .filter(|q| !q.is_identity())
+        .map(|set| Over {
+            outline: sol.outline.clone(),
+            set,
+        });
+    let (front, back, cov) = match &over {
+        None => (
+            sol.front.coefficients_nm().to_vec(),
+            sol.back.coefficients_nm().to_vec(),
+            cov,
+        ),
+        Some(o) => {
+            let lt = o.set.matrix();
+            let mut t = DMatrix::zeros(nf + nb, nf + nb);
+            t.view_mut((0, 0), (nf, nf))
+                .copy_from(&lt.view((0, 0), (nf, nf)));
+            t.view_mut((nf, nf), (nb, nb))
+                .copy_from(&lt.view((0, 0), (nb, nb)));
+            let n = cov.nrows().min(nf + nb);
+            let mut c = DMatrix::zeros(nf + nb, nf + nb);
+            c.view_mut((0, 0), (n, n))
+                .copy_from(&cov.view((0, 0), (n, n)));
+            let mut a_f = o.set.coefficients(sol.front.coefficients_nm());
+            let mut a_b = o.set.coefficients(sol.back.coefficients_nm());
+            a_f.truncate(nf);
+            a_b.truncate(nb);
+            (a_f, a_b, &t * c * t.transpose())
+        }
+    };
     let input = FigureInput {
-        front_nm: sol.front.coefficients_nm(),
-        back_nm: sol.back.coefficients_nm(),
+        front_nm: &front,
+        back_nm: &back,
         covariance_nm2: &cov,
         radius_mm: sol.front.basis().radius_mm(),
         refractive_index: station.element.refractive_index,
@@ -85,6 +124,7 @@ pub fn of_solution(
         }
         .into(),
         withheld: [withheld[0].clone(), back_why],
+        over: over.as_ref(),
     };
     figures(&input).ok()
 }

@@ -65,6 +65,7 @@ fn the_joint_covariance_is_the_budgets_and_keeps_the_shared_tilt_out_of_the_wedg
         wavelength_nm: 1053.0,
         covariance_note: "the faces' blocks alone".into(),
         withheld: [None, None],
+        over: None,
     })
     .unwrap();
     let apart_arcsec = without.plate.as_ref().unwrap().wedge_std_arcsec;
