@@ -291,3 +291,31 @@ fn surfaces_version_3_is_read_strictly() {
     let e = SurfacesFile::from_json_str(&v3.to_string(), Path::new("s.json")).unwrap_err();
     assert!(e.to_string().contains("`outline`"), "{e}");
 }
+
+#[test]
+fn mfd_station_writes_a_rectangle_in_the_disk_of_its_half_diagonal() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rect.toml");
+    crate::common::mfd_ok(&[
+        "station",
+        "--rectangle-mm",
+        "60,40",
+        "--rectangle-rotation-deg",
+        "-30",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let s = Station::load(&out).unwrap();
+    assert_eq!(
+        s.element.outline,
+        Shape::Rectangle {
+            sides_mm: [60.0, 40.0],
+            rotation_deg: -30.0
+        }
+    );
+    // The least disk that holds it: the half-diagonal √(30² + 20²).
+    assert!((s.element.aperture_radius_mm - 1300f64.sqrt()).abs() < 1e-12);
+    assert!(std::fs::read_to_string(&out)
+        .unwrap()
+        .contains("mfd-station/3"));
+}

@@ -129,7 +129,8 @@ fn each_rule_of_the_reader_names_the_file_and_field() {
             V1.replace("[0.0, 12.5, -3.1, 40.2]", "null"),
             "front.coefficients_nm",
         ),
-        (V1.replace("mfd-surfaces/1", "mfd-surfaces/3"), "format"),
+        // Version 3 is the outline proposal (docs/proposals/outline.md).
+        (V1.replace("mfd-surfaces/1", "mfd-surfaces/4"), "format"),
         (V1.replace("\"rms\"", "\"peak\""), "zernike.normalization"),
     ];
     for (text, field) in cases {
