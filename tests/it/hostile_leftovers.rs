@@ -1,0 +1,222 @@
+//! Issue 37's leftovers through the binary: a manifest that does not match
+//! its bright frames is named as such, not as dark frames; the console
+//! answers to the machine's own names off loopback and to no other.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use crate::common::{mfd, public_small};
+
+fn run(args: &[&str]) -> (i32, String) {
+    let out = mfd(args);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.code().unwrap_or(-1), text)
+}
+
+/// An acquisition rendered by `mfd simulate` on the small public station
+/// (48 × 48 camera, τ 0.2…200 step 0.2 on both diagonals, 1 % noise), its
+/// manifest rewritten by `edit`.
+fn simulated(dir: &Path, edit: &dyn Fn(&str) -> String) -> PathBuf {
+    let acq = dir.join("acq");
+    let st = public_small().join("station.toml");
+    let (code, text) = run(&[
+        "simulate",
+        "--station",
+        st.to_str().unwrap(),
+        "--out",
+        acq.to_str().unwrap(),
+        "--noise",
+        "0.01",
+    ]);
+    assert_eq!(code, 0, "{text}");
+    let manifest = acq.join("acquisition.toml");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let edited = edit(&text);
+    assert_ne!(edited, text, "the edit changed nothing");
+    std::fs::write(&manifest, edited).unwrap();
+    acq
+}
+
+fn reconstruct(acq: &Path) -> (i32, String) {
+    let out = acq.parent().unwrap().join("R");
+    run(&[
+        "reconstruct",
+        acq.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+/// The largest count the message names ("they reach N counts").
+fn reached(text: &str) -> u32 {
+    let (_, rest) = text.split_once("they reach ").expect(text);
+    rest.split_whitespace().next().unwrap().parse().unwrap()
+}
+
+/// Issue 37: one frame relabelled to 30°, or the τ values shuffled, gave
+/// "no fringe signal … are the frames dark?" with frames reaching 63 463
+/// counts. Now the message says the frames are bright, how bright, that
+/// the manifest's directions or τ do not match them, and how many frames
+/// each direction has; exit 4 (nothing measured) as before.
+#[test]
+fn bright_frames_that_do_not_match_the_manifest_are_not_called_dark() {
+    let relabel = |t: &str| {
+        // The 100th frame's direction (a frame of the +45° run).
+        let mut parts: Vec<String> = t.split("[[frame]]").map(str::to_string).collect();
+        parts[100] = parts[100].replacen("direction_deg = 45.0", "direction_deg = 30.0", 1);
+        parts.join("[[frame]]")
+    };
+    let shuffle = |t: &str| {
+        // τ values reversed within the manifest (a fixed permutation).
+        let taus: Vec<&str> = t.lines().filter_map(|l| l.strip_prefix("tau = ")).collect();
+        let mut rev = taus.iter().rev();
+        t.lines()
+            .map(|l| match l.strip_prefix("tau = ") {
+                Some(_) => format!("tau = {}", rev.next().unwrap()),
+                None => l.to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+            + "\n"
+    };
+    for (name, edit, needle) in [
+        (
+            "relabelled",
+            &relabel as &dyn Fn(&str) -> String,
+            "30°: 1 (τ",
+        ),
+        ("shuffled τ", &shuffle, "45°: 1000 (τ"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let acq = simulated(dir.path(), edit);
+        let (code, text) = reconstruct(&acq);
+        assert!(code == 4 || code == 5, "{name}: exit {code}: {text}");
+        assert!(!text.contains("dark"), "{name}: {text}");
+        if text.contains("no fringe signal") {
+            assert!(
+                text.contains("do not match the frames") && text.contains(needle),
+                "{name}: {text}"
+            );
+            // The simulator's flat screen at full scale, through the plate:
+            // bright frames, far above the dark limit.
+            assert!(reached(&text) > 10_000, "{name}: {text}");
+        } else {
+            // A fit that was made but contradicts the station says so.
+            assert!(
+                text.contains("station") || text.contains("manifest"),
+                "{name}: {text}"
+            );
+        }
+    }
+}
+
+/// The same acquisition with every frame zero is still called dark.
+#[test]
+fn dark_frames_are_still_called_dark() {
+    let dir = tempfile::tempdir().unwrap();
+    let acq = simulated(dir.path(), &|t| {
+        t.replacen("# written", "# zeroed, written", 1)
+    });
+    let stack = acq.join("frames.npy");
+    let bytes = std::fs::read(&stack).unwrap();
+    // The NPY header's length is at bytes 8–9 (version 1) after the magic.
+    let header = 10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let mut zero = bytes[..header].to_vec();
+    zero.resize(bytes.len(), 0);
+    std::fs::write(&stack, zero).unwrap();
+    let (code, text) = reconstruct(&acq);
+    assert_eq!(code, 4, "{text}");
+    assert!(text.contains("are the frames dark"), "{text}");
+    assert!(text.contains("largest count in any frame: 0"), "{text}");
+}
+
+/// `GET /api/state` with `host` to a console bound to all interfaces,
+/// with its access token: the status code.
+fn status_for_host(addr: SocketAddr, token: &str, host: &str) -> u16 {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    write!(
+        s,
+        "GET /api/state?token={token} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut answer = String::new();
+    s.read_to_string(&mut answer).unwrap();
+    answer
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0)
+}
+
+/// Issue 37: off loopback the console refused its machine's own name in
+/// `Host`, so operators had to use the address. Now the hostname and each
+/// `--allow-host` name pass (with the port); any other name is still
+/// refused (DNS rebinding), as is a machine name with another port.
+#[test]
+fn off_loopback_the_machines_own_names_pass_and_no_other() {
+    use mfd::console::{self, Console};
+    let allowed = ["bench-pc.lab.example".to_string()];
+    let open = console::serve_with_names(
+        "0.0.0.0:0".parse().unwrap(),
+        Console::results_only(),
+        &allowed,
+    )
+    .unwrap();
+    let port = open.local_addr().port();
+    let at = SocketAddr::from(([127, 0, 0, 1], port));
+    let token = open.token().unwrap().to_string();
+    let own = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .unwrap()
+        .trim()
+        .to_ascii_lowercase();
+    for ok in [
+        format!("{own}:{port}"),
+        format!("{}:{port}", own.to_ascii_uppercase()),
+        format!("bench-pc.lab.example:{port}"),
+        format!("127.0.0.1:{port}"),
+    ] {
+        assert_eq!(status_for_host(at, &token, &ok), 200, "{ok}");
+    }
+    for bad in [
+        format!("rebind.example:{port}"),
+        format!("{own}.rebind.example:{port}"),
+        format!("lab.example:{port}"),
+        format!("{own}:{}", port.wrapping_add(1)),
+    ] {
+        assert_eq!(status_for_host(at, &token, &bad), 403, "{bad}");
+    }
+    open.shutdown();
+
+    // On loopback the hostname is not added (only what the operator named).
+    let local = console::serve_with_names(
+        "127.0.0.1:0".parse().unwrap(),
+        Console::results_only(),
+        &allowed,
+    )
+    .unwrap();
+    let at = local.local_addr();
+    let port = at.port();
+    let get = |host: &str| {
+        use std::io::{Read, Write};
+        let mut s = std::net::TcpStream::connect(at).unwrap();
+        write!(
+            s,
+            "GET /api/state HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut a = String::new();
+        s.read_to_string(&mut a).unwrap();
+        a.split_whitespace().nth(1).unwrap_or("0").to_string()
+    };
+    assert_eq!(get(&format!("bench-pc.lab.example:{port}")), "200");
+    assert_eq!(get(&format!("rebind.example:{port}")), "403");
+    if !matches!(own.as_str(), "localhost" | "bench-pc.lab.example") {
+        assert_eq!(get(&format!("{own}:{port}")), "403", "{own}");
+    }
+    local.shutdown();
+}
