@@ -292,3 +292,67 @@ fn an_interferometer_map_linked_to_dev_zero_is_refused() {
         t.elapsed()
     );
 }
+
+/// Issue 37's misleading messages, each now naming its real cause: a
+/// nominal focal length of 1e-9 mm was blamed on `camera.distortion`,
+/// `--height-scale-nm 1e308` on the registration, and `--terms`'s help said
+/// 1 to 231 where its check said 3..=231.
+#[test]
+fn misleading_messages_name_the_real_cause() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = public_small();
+    let station = std::fs::read_to_string(src.join("station.toml")).unwrap();
+    let tiny: String = station
+        .lines()
+        .map(|l| match l.starts_with("focal_length_mm") {
+            true => "focal_length_mm = 1e-9".to_string(),
+            false => l.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_ne!(tiny, station);
+    let tf = dir.path().join("tiny_focal.toml");
+    std::fs::write(&tf, tiny).unwrap();
+    let (code, text) = run(&[
+        "simulate",
+        "--station",
+        tf.to_str().unwrap(),
+        "--out",
+        dir.path().join("o").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("camera.focal_length_mm"), "{text}");
+    assert!(!text.contains("distortion"), "{text}");
+
+    let truth = src.join("truth/truth_surfaces.json");
+    let mask = src.join("truth/aperture_mask.npy");
+    let (code, text) = run(&[
+        "compare",
+        "--surfaces",
+        truth.to_str().unwrap(),
+        "--interferometer",
+        mask.to_str().unwrap(),
+        "--height-scale-nm",
+        "1e308",
+    ]);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("--height-scale-nm"), "{text}");
+    assert!(!text.contains("registration"), "{text}");
+
+    let (_, help) = run(&["reconstruct", "--help"]);
+    assert!(help.contains("N from 3 to 231"), "{help}");
+    let acq = src.to_str().unwrap();
+    let out = dir.path().join("R");
+    for (terms, code) in [("2", 2), ("232", 2)] {
+        let (c, text) = run(&[
+            "reconstruct",
+            acq,
+            "--out",
+            out.to_str().unwrap(),
+            "--terms",
+            terms,
+        ]);
+        assert_eq!(c, code, "--terms {terms}: {text}");
+        assert!(text.contains("expected 3 to 231"), "{text}");
+    }
+}
