@@ -456,7 +456,9 @@ fn spectral_stage(
         solver.design(),
         options.limits,
     );
-    if let Some(why) = consistency::why_nothing(&maps, solver.candidate_pixels(), max_count) {
+    if let Some(why) =
+        consistency::why_nothing(&maps, solver.candidate_pixels(), max_count, solver.design())
+    {
         // The surface stage would fail on the absence; without one the
         // (empty) maps are the result, and the reason a warning.
         if options.surfaces.is_some() {

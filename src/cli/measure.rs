@@ -124,6 +124,10 @@ pub struct MeasureArgs {
     /// the token printed at start. It stays open after the run until Ctrl-C.
     #[arg(long, value_name = "ADDR", value_parser = super::serve::parse_addr)]
     serve: Option<std::net::SocketAddr>,
+    /// With --serve: a name of this machine the console may be opened by,
+    /// as `mfd serve --allow-host`; repeatable.
+    #[arg(long, value_name = "NAME", requires = "serve")]
+    allow_host: Vec<String>,
     /// With --serve: close the console at most this long after the run, s.
     #[arg(long, value_parser = super::check::non_negative, value_name = "SECONDS", requires = "serve")]
     serve_keep_s: Option<f64>,

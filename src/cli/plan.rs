@@ -273,8 +273,11 @@ fn print_summary(p: &Prediction) {
             "direction {:+.0}°: main lobe ±{:.1} px, unambiguous range {}",
             d.direction_deg,
             d.main_lobe_px,
-            d.unambiguous_range_px
-                .map_or("the whole screen".into(), |r| format!("{r:.1} px"))
+            match (d.unambiguous_range_px, d.false_maximum_height) {
+                (Some(r), Some(h)) => format!("{r:.1} px (a false maximum of height {h:.2})"),
+                (Some(r), None) => format!("{r:.1} px"),
+                _ => "the whole screen".into(),
+            }
         );
     }
     println!(

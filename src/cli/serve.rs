@@ -25,6 +25,12 @@ pub struct ServeArgs {
     /// but a loopback one needs the token printed at start.
     #[arg(long, default_value = "127.0.0.1:8089", value_parser = parse_addr)]
     addr: SocketAddr,
+    /// A name of this machine the console may be opened by (the `Host` a
+    /// browser sends), besides its addresses, loopback names and, off
+    /// loopback, its hostname; repeatable. Any other name is refused (DNS
+    /// rebinding).
+    #[arg(long, value_name = "NAME")]
+    allow_host: Vec<String>,
 }
 
 /// `PORT` (on 127.0.0.1) or `HOST:PORT`.
@@ -54,7 +60,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         let name = name_of(&dir);
         console.add_results(&name, &dir);
     }
-    let handle = console::serve(args.addr, console)?;
+    let handle = console::serve_with_names(args.addr, console, &args.allow_host)?;
     announce(&handle);
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
@@ -107,7 +113,8 @@ pub struct Served {
 
 impl Served {
     /// Starts the console on `addr` for a run in `mode` whose stop flag is
-    /// `stop`, serving `result_dir` as it fills.
+    /// `stop`, serving `result_dir` as it fills; `allow_host` as `mfd serve
+    /// --allow-host`.
     ///
     /// # Errors
     /// The address cannot be listened on.
@@ -117,10 +124,11 @@ impl Served {
         stop: &Arc<AtomicBool>,
         screen_px: [u32; 2],
         result_dir: &Path,
+        allow_host: &[String],
     ) -> anyhow::Result<Self> {
         let console = Console::live(mode, Arc::clone(stop), Some(screen_px));
         console.add_results("result", result_dir);
-        let handle = console::serve(addr, console.clone())?;
+        let handle = console::serve_with_names(addr, console.clone(), allow_host)?;
         announce(&handle);
         Ok(Served {
             console,

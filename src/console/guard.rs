@@ -7,7 +7,9 @@
 //!
 //! 1. **Host.** The `Host` (or, in HTTP/2, the request's authority) must name
 //!    the address the connection reached (`ip:port`) or a loopback name
-//!    (`localhost`, `127.0.0.1`, `[::1]`) with the console's port; else 403.
+//!    (`localhost`, `127.0.0.1`, `[::1]`) with the console's port, or, off
+//!    loopback, one of the machine's own names ([`machine_names`]: its
+//!    hostname, and each `--allow-host NAME` the operator gave); else 403.
 //!    A page of another site whose name an attacker re-points at 127.0.0.1
 //!    (DNS rebinding) sends its own name, so it is refused although the
 //!    browser thinks it is talking to its own origin.
@@ -118,10 +120,11 @@ fn refusal(app: &App, local: SocketAddr, req: &Request) -> Option<Response> {
     let Some(host) = authority(req) else {
         return Some(forbidden("the request names no Host"));
     };
-    if !host_is_ours(host, local) {
+    if !host_is_ours(host, local, &app.host_names) {
         return Some(forbidden(&format!(
             "Host {host:?} is not this console's address: open it as \
-             http://127.0.0.1:{}/ (or the address mfd printed)",
+             http://127.0.0.1:{}/ (or the address mfd printed; `--allow-host NAME` \
+             admits another name of this machine)",
             local.port()
         )));
     }
@@ -169,9 +172,36 @@ fn authority(req: &Request) -> Option<&str> {
     }
 }
 
-/// Whether `host` (`name[:port]`) is `local`'s address or a loopback name,
-/// with `local`'s port (none written: 80).
-pub fn host_is_ours(host: &str, local: SocketAddr) -> bool {
+/// The names the console answers to besides addresses and loopback names:
+/// `allowed` (the operator's `--allow-host`), and, when it listens beyond
+/// loopback (`off_loopback`), the machine's hostname (the kernel's, as
+/// `gethostname(2)` gives it: `/proc/sys/kernel/hostname`, else
+/// `/etc/hostname`). Lower case, no trailing dot. A rebinding page names
+/// its attacker's domain, never one of these: the attacker does not choose
+/// this machine's name nor what the operator allowed.
+pub fn machine_names(allowed: &[String], off_loopback: bool) -> Vec<String> {
+    let mut names: Vec<String> = allowed.iter().map(|n| normal_name(n)).collect();
+    if off_loopback {
+        let own = ["/proc/sys/kernel/hostname", "/etc/hostname"]
+            .iter()
+            .find_map(|p| std::fs::read_to_string(p).ok())
+            .map(|n| normal_name(&n));
+        names.extend(own);
+    }
+    names.retain(|n| !n.is_empty());
+    names.sort();
+    names.dedup();
+    names
+}
+
+fn normal_name(n: &str) -> String {
+    n.trim().trim_end_matches('.').to_ascii_lowercase()
+}
+
+/// Whether `host` (`name[:port]`) is `local`'s address, a loopback name or
+/// one of `names` ([`machine_names`], lower case), with `local`'s port
+/// (none written: 80).
+pub fn host_is_ours(host: &str, local: SocketAddr, names: &[String]) -> bool {
     let (name, port) = if let Some(rest) = host.strip_prefix('[') {
         let Some((inside, after)) = rest.split_once(']') else {
             return false;
@@ -191,7 +221,7 @@ pub fn host_is_ours(host: &str, local: SocketAddr) -> bool {
         return false;
     }
     let name = name.to_ascii_lowercase();
-    if matches!(name.as_str(), "localhost" | "127.0.0.1" | "[::1]") {
+    if matches!(name.as_str(), "localhost" | "127.0.0.1" | "[::1]") || names.contains(&name) {
         return true;
     }
     let ip = match name.strip_prefix('[').and_then(|n| n.strip_suffix(']')) {
@@ -276,7 +306,7 @@ mod tests {
             "127.0.0.1:8089",
             "[::1]:8089",
         ] {
-            assert!(host_is_ours(ok, v4), "{ok}");
+            assert!(host_is_ours(ok, v4, &[]), "{ok}");
         }
         for bad in [
             "attacker.example:8089",
@@ -291,15 +321,46 @@ mod tests {
             "",
             ":8089",
         ] {
-            assert!(!host_is_ours(bad, v4), "{bad}");
+            assert!(!host_is_ours(bad, v4, &[]), "{bad}");
         }
         let v6: SocketAddr = "[fe80::1]:80".parse().unwrap();
-        assert!(host_is_ours("[fe80::1]", v6));
-        assert!(host_is_ours("[FE80:0::1]:80", v6));
-        assert!(host_is_ours("localhost", v6));
+        assert!(host_is_ours("[fe80::1]", v6, &[]));
+        assert!(host_is_ours("[FE80:0::1]:80", v6, &[]));
+        assert!(host_is_ours("localhost", v6, &[]));
         // Bound to [::] and reached over IPv4: the socket says ::ffff:a.b.c.d.
         let mapped: SocketAddr = "[::ffff:10.0.0.7]:8089".parse().unwrap();
-        assert!(host_is_ours("10.0.0.7:8089", mapped));
+        assert!(host_is_ours("10.0.0.7:8089", mapped, &[]));
+    }
+
+    #[test]
+    fn the_machines_own_names_pass_and_no_other() {
+        let v4: SocketAddr = "192.168.1.5:8089".parse().unwrap();
+        let names = machine_names(&["Bench-PC.lab.example.".into(), "bench".into()], false);
+        assert_eq!(names, ["bench", "bench-pc.lab.example"]);
+        for ok in [
+            "bench-pc.lab.example:8089",
+            "BENCH:8089",
+            "192.168.1.5:8089",
+        ] {
+            assert!(host_is_ours(ok, v4, &names), "{ok}");
+        }
+        for bad in [
+            "bench:8090",
+            "bench",
+            "bench.attacker.example:8089",
+            "attacker.example:8089",
+            "lab.example:8089",
+            "bench-pc:8089",
+        ] {
+            assert!(!host_is_ours(bad, v4, &names), "{bad}");
+        }
+        // Off loopback the kernel's hostname joins them; on loopback only
+        // the names given.
+        let own = std::fs::read_to_string("/proc/sys/kernel/hostname").map(|n| normal_name(&n));
+        if let Some(own) = own.ok().filter(|n| !n.is_empty()) {
+            assert!(machine_names(&[], true).contains(&own));
+            assert!(!machine_names(&[], false).contains(&own));
+        }
     }
 
     #[test]

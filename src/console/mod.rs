@@ -37,7 +37,7 @@ use std::net::SocketAddr;
 
 pub use preview::{Encoded, Preview, PreviewError};
 pub use results::{list_results, result_file, ResultFile, ResultListing, Served};
-pub use server::{serve, ConsoleHandle};
+pub use server::{serve, serve_with_names, ConsoleHandle};
 pub use state::{Console, Mode, Progress, ResultDir, Showing, Spectral, Stage, Status};
 
 /// Errors of starting the console.

@@ -55,6 +55,9 @@ pub(super) struct App {
     pub(super) token: Arc<str>,
     /// Whether every request needs [`App::token`] (off loopback).
     pub(super) token_everywhere: bool,
+    /// Names the `Host` may give besides addresses and loopback names
+    /// ([`super::guard::machine_names`]).
+    pub(super) host_names: Arc<[String]>,
     closing: watch::Receiver<bool>,
     cache: Arc<Mutex<Option<Arc<Encoded>>>>,
 }
@@ -139,8 +142,23 @@ fn new_token() -> String {
 /// [`ConsoleError::Bind`] when the address cannot be taken;
 /// [`ConsoleError::Runtime`] when the server thread cannot start.
 pub fn serve(addr: SocketAddr, console: Console) -> Result<ConsoleHandle, ConsoleError> {
+    serve_with_names(addr, console, &[])
+}
+
+/// [`serve`], the `Host` also allowed to name each of `allowed_hosts` (the
+/// operator's `--allow-host`) and, off loopback, the machine's hostname
+/// ([`super::guard::machine_names`]).
+///
+/// # Errors
+/// As [`serve`].
+pub fn serve_with_names(
+    addr: SocketAddr,
+    console: Console,
+    allowed_hosts: &[String],
+) -> Result<ConsoleHandle, ConsoleError> {
     let token = new_token();
     let token_everywhere = !addr.ip().is_loopback();
+    let host_names = super::guard::machine_names(allowed_hosts, token_everywhere).into();
     let listener =
         std::net::TcpListener::bind(addr).map_err(|source| ConsoleError::Bind { addr, source })?;
     listener
@@ -160,6 +178,7 @@ pub fn serve(addr: SocketAddr, console: Console) -> Result<ConsoleHandle, Consol
         console,
         token: Arc::from(token.as_str()),
         token_everywhere,
+        host_names,
         closing: closing.clone(),
         cache: Arc::new(Mutex::new(None)),
     };

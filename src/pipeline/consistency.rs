@@ -78,13 +78,23 @@ impl Default for Limits {
     }
 }
 
+/// The largest count at or below which frames are dark: a sixteenth of an
+/// 8-bit camera's full scale. Such a frame can hold a fringe of at most 8
+/// counts' amplitude (half its range), within the quantisation and read
+/// noise of the 8-bit cameras mfd reads; any brighter frame can show
+/// fringes, so their absence is not the light's fault.
+pub const DARK_COUNT: u16 = 16;
+
 /// Why nothing was measured, when no pixel has a front point: `None` when
 /// something was, or when the pixels say only that the reflections were
-/// not separable (the surface-domain estimator's case).
+/// not separable (the surface-domain estimator's case). `max_count` is the
+/// largest count of any frame; `design` the manifest's schedule, whose
+/// frames per direction are named when bright frames show no fringe.
 pub fn why_nothing(
     maps: &SpectralMaps,
     candidates: usize,
     max_count: Option<u16>,
+    design: &Design,
 ) -> Option<String> {
     let found = maps.pixels.iter().filter(|p| p.s[0][0].is_finite()).count();
     if found > 0 {
@@ -111,10 +121,20 @@ pub fn why_nothing(
     // Flat frames leave every pixel without data (no sample varies) or
     // without signal.
     if fitted.is_empty() || share(PixelFlags::NO_SIGNAL) > 0.99 {
-        return Some(format!(
-            "no fringe signal in any of the {candidates} pixels where the station puts the \
-             element: are the frames dark, or the screen not in view?{counts}"
-        ));
+        return Some(match max_count {
+            Some(m) if m > DARK_COUNT => format!(
+                "no fringe signal at the manifest's τ and directions in any of the \
+                 {candidates} pixels where the station puts the element, although the frames \
+                 are bright (they reach {m} counts): the manifest's directions, τ or phases \
+                 do not match the frames (a relabelled frame, τ values out of order?), or \
+                 the screen shows no fringes; {}",
+                frames_per_direction(design)
+            ),
+            _ => format!(
+                "no fringe signal in any of the {candidates} pixels where the station puts \
+                 the element: are the frames dark, or the screen not in view?{counts}"
+            ),
+        });
     }
     if share(PixelFlags::OUT_OF_BAND | PixelFlags::OFFSET_MISMATCH | PixelFlags::FAR_FROM_PRIOR)
         > 0.5
@@ -132,6 +152,33 @@ pub fn why_nothing(
         ));
     }
     None
+}
+
+/// The manifest's frames per direction and their τ range, in words
+/// ("frames per direction: 45°: 200 (τ 0.5–100), 30°: 1 (τ 37)").
+fn frames_per_direction(design: &Design) -> String {
+    let each: Vec<String> = design
+        .directions_deg
+        .iter()
+        .enumerate()
+        .map(|(d, deg)| {
+            let taus: Vec<f64> = design
+                .frames
+                .iter()
+                .filter(|f| f.dir == d)
+                .map(|f| f.tau)
+                .collect();
+            let lo = taus.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = taus.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let range = if lo == hi {
+                format!("τ {lo}")
+            } else {
+                format!("τ {lo}–{hi}")
+            };
+            format!("{deg}°: {} ({range})", taus.len())
+        })
+        .collect();
+    format!("frames per direction: {}", each.join(", "))
 }
 
 /// The χ² threshold on residual variance over noise variance for `dof`
@@ -292,7 +339,7 @@ fn note(c: &Consistency, worst: f64, far_share: f64) -> String {
     note + &aliases
 }
 
-/// The shortest distance to a false maximum of the schedule's ambiguity
+/// The shortest distance to a strong false maximum of the schedule's ambiguity
 /// function over the screen, any direction, without the modulation falloff
 /// (the planner's [`crate::plan::ambiguity::direction_ambiguity`]).
 fn alias_spacing(station: &Station, design: &Design) -> Option<f64> {
@@ -308,7 +355,9 @@ fn alias_spacing(station: &Station, design: &Design) -> Option<f64> {
                 .map(|f| f.tau)
                 .collect();
             let axis = FringeAxis::new(deg, station.screen.width, station.screen.height);
-            crate::plan::ambiguity::direction_ambiguity(&taus, 0.0, &axis).1
+            crate::plan::ambiguity::direction_ambiguity(&taus, 0.0, &axis)
+                .1
+                .map(|a| a.distance_px)
         })
         .reduce(f64::min)
 }

@@ -36,6 +36,8 @@ pub struct DirectionAmbiguity {
     /// Distance to the nearest false maximum of at least [`SIDELOBE_MAX`],
     /// screen px; `None` when there is none on the screen.
     pub unambiguous_range_px: Option<f64>,
+    /// That false maximum's height relative to the true one.
+    pub false_maximum_height: Option<f64>,
 }
 
 /// The ambiguity of a schedule.
@@ -71,31 +73,87 @@ pub fn ambiguity_at(taus: &[f64], kappa: f64, delta: f64) -> f64 {
     }
 }
 
-/// The main lobe and unambiguous range of one direction, scanned over the
-/// whole screen (Δ up to 1.05 in fringe coordinate) at 1/32 of the
-/// finest fringe period ([`ambiguity_at`]'s values, by the linear-time
-/// [`scan`]).
-pub fn direction_ambiguity(taus: &[f64], kappa: f64, axis: &FringeAxis) -> (f64, Option<f64>) {
+/// A false maximum of the ambiguity function: where a fit's start can lock
+/// onto the wrong fringe.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FalseMaximum {
+    /// Its distance from the true point along the fringe coordinate, screen
+    /// px: the schedule's alias spacing in this direction.
+    pub distance_px: f64,
+    /// Its height relative to the true maximum (1).
+    pub height: f64,
+}
+
+/// The main lobe (half width to [`SIDELOBE_MAX`], screen px) and the
+/// nearest strong false maximum of one direction, scanned over the whole
+/// screen (Δ up to 1.05 in fringe coordinate) at 1/32 of the finest fringe
+/// period ([`ambiguity_at`]'s values, by the linear-time [`scan`]). The
+/// false maximum is the highest point of the first excursion back above
+/// [`SIDELOBE_MAX`] beyond the main lobe (refined by the parabola through
+/// the highest step and its neighbours): where the copy of every screen
+/// point lies, not where the function first climbs towards it.
+pub fn direction_ambiguity(
+    taus: &[f64],
+    kappa: f64,
+    axis: &FringeAxis,
+) -> (f64, Option<FalseMaximum>) {
     let tau_hi = taus.iter().copied().fold(1.0, f64::max);
     let step = 1.0 / (32.0 * tau_hi);
     let n = (1.05 / step).ceil() as usize;
     let mut lobe = None;
-    let mut range = None;
+    // The excursion above SIDELOBE_MAX: its highest step (k, value) and the
+    // values before and after it.
+    let mut best: Option<(usize, f64)> = None;
+    let (mut before, mut after) = (f64::NAN, f64::NAN);
+    let mut prev = 1.0;
     let mut scan = Scan::new(taus, kappa, step);
     for k in 1..=n {
-        let d = k as f64 * step;
         let a = scan.next_value();
-        match lobe {
-            None if a < SIDELOBE_MAX => lobe = Some(d),
-            Some(_) if a >= SIDELOBE_MAX => {
-                range = Some(d);
-                break;
+        match (lobe, best) {
+            (None, _) if a < SIDELOBE_MAX => lobe = Some(k as f64 * step),
+            (Some(_), None) if a >= SIDELOBE_MAX => {
+                best = Some((k, a));
+                before = prev;
+            }
+            (Some(_), Some((_, top))) => {
+                if a < SIDELOBE_MAX {
+                    if after.is_nan() {
+                        after = a;
+                    }
+                    break;
+                }
+                if a > top {
+                    best = Some((k, a));
+                    before = prev;
+                    after = f64::NAN;
+                } else if after.is_nan() {
+                    after = a;
+                }
             }
             _ => {}
         }
+        prev = a;
     }
     let px = |d: f64| d * axis.length_px;
-    (px(lobe.unwrap_or(1.05)), range.map(px))
+    let false_max = best.map(|(k, top)| {
+        // The vertex of the parabola through (k−1, k, k+1), within a step.
+        let curve = before - 2.0 * top + after;
+        let shift = if curve < 0.0 && after.is_finite() {
+            (0.5 * (before - after) / curve).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        };
+        let height = if curve < 0.0 && after.is_finite() {
+            top - 0.125 * (before - after) * (before - after) / curve
+        } else {
+            top
+        };
+        FalseMaximum {
+            distance_px: px((k as f64 + shift) * step),
+            height: height.min(1.0),
+        }
+    });
+    (px(lobe.unwrap_or(1.05)), false_max)
 }
 
 /// The plate the plan expects: both faces bent by a defocus of
@@ -233,11 +291,12 @@ pub fn ambiguity(
             let (w, h) = (station.screen.width, station.screen.height);
             let axis = FringeAxis::new(d, w, h);
             // The physical falloff of this direction's fringe length.
-            let (lobe, range) = direction_ambiguity(&taus, axis.physical_kappa(kappa, w, h), &axis);
+            let (lobe, alias) = direction_ambiguity(&taus, axis.physical_kappa(kappa, w, h), &axis);
             DirectionAmbiguity {
                 direction_deg: d,
                 main_lobe_px: lobe,
-                unambiguous_range_px: range,
+                unambiguous_range_px: alias.map(|a| a.distance_px),
+                false_maximum_height: alias.map(|a| a.height),
             }
         })
         .collect();
@@ -276,15 +335,72 @@ mod tests {
 
     #[test]
     fn one_tau_aliases_at_its_period() {
-        // cos(2π τ Δ) with τ = 100: back at 0.5 at Δ = 1/100 − 1/600.
+        // cos(2π τ Δ) with τ = 100: below 0.5 from Δ = 1/600, back at its
+        // full height 1 at Δ = 1/100.
         let axis = FringeAxis::new(45.0, 1600, 1200);
-        let (lobe, range) = direction_ambiguity(&[100.0, 100.0], 0.0, &axis);
+        let (lobe, alias) = direction_ambiguity(&[100.0, 100.0], 0.0, &axis);
         let step = axis.length_px / 3200.0;
         assert!((lobe - axis.length_px / 600.0).abs() <= step, "{lobe}");
-        let r = range.expect("aliases");
+        let a = alias.expect("aliases");
+        // The scan's grid holds Δ = 1/100 exactly (32 steps), so the
+        // parabola's vertex is the sample itself, to rounding.
         assert!(
-            (r - (0.01 - 1.0 / 600.0) * axis.length_px).abs() <= step,
-            "{r}"
+            (a.distance_px - 0.01 * axis.length_px).abs() < 1e-6 * step,
+            "{a:?}"
         );
+        assert!((a.height - 1.0).abs() < 1e-9, "{a:?}");
+    }
+
+    /// The nearest strong false maximum by brute force: `Σ cos(2π τ_k Δ)/K`
+    /// on a grid of 1e-6 screen lengths, the first local maximum of at least
+    /// [`SIDELOBE_MAX`] after the value first fell below it.
+    fn brute_force_alias(taus: &[f64]) -> (f64, f64) {
+        let value = |d: f64| {
+            taus.iter()
+                .map(|t| (std::f64::consts::TAU * t * d).cos())
+                .sum::<f64>()
+                / taus.len() as f64
+        };
+        let h = 1e-6;
+        let mut k = 1;
+        while value(k as f64 * h) >= SIDELOBE_MAX {
+            k += 1;
+        }
+        loop {
+            let (a, b, c) = (
+                value((k - 1) as f64 * h),
+                value(k as f64 * h),
+                value((k + 1) as f64 * h),
+            );
+            if b >= SIDELOBE_MAX && b > a && b >= c {
+                return (k as f64 * h, b);
+            }
+            k += 1;
+        }
+    }
+
+    #[test]
+    fn the_alias_is_the_false_maximum_not_the_climb_towards_it() {
+        // Issue 37: τ ∈ {0.9, 3.9, 15.9, 63.9} climbs back to 0.5 at Δ ≈
+        // 0.0105 but its copy lies at the false maximum, Δ ≈ 0.0150 of height
+        // ≈ 0.74 (the result said "8 px away" for the climb).
+        let taus = [0.9, 3.9, 15.9, 63.9];
+        let axis = FringeAxis::new(45.0, 1600, 1200);
+        let (want_d, want_h) = brute_force_alias(&taus);
+        assert!((want_d - 0.0150).abs() < 1e-4 && (want_h - 0.742).abs() < 1e-3);
+        let (_, alias) = direction_ambiguity(&taus, 0.0, &axis);
+        let a = alias.expect("aliases");
+        // The scan samples every 1/(32·63.9) of the screen and refines with a
+        // parabola; the brute force's grid is 1e-6: a tenth of the scan's
+        // step bounds both (the parabola's error on a peak sampled 32 times
+        // per finest period is far below it).
+        let step = 1.0 / (32.0 * 63.9);
+        assert!(
+            (a.distance_px / axis.length_px - want_d).abs() < 0.1 * step,
+            "{a:?} vs {want_d}"
+        );
+        // Height: the quartic term the parabola leaves out at one step of the
+        // finest component, (2π/32)⁴/24 ≈ 6e-5, with margin.
+        assert!((a.height - want_h).abs() < 1e-3, "{a:?} vs {want_h}");
     }
 }

@@ -20,6 +20,7 @@
 
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::optics::trace::{PixelPaths, TracedView};
@@ -263,48 +264,55 @@ pub fn stage_check(
         .flatten();
     let full = ((1u32 << opts.radiometry.bit_depth.min(16)) - 1) as u16;
     let sat = config.saturation_counts.unwrap_or(full);
-    let (mut ok, mut silent) = (0usize, 0usize);
     let falloff0 = design.uniform_falloff(kappa0);
-    for (i, &q) in pixels.iter().enumerate() {
-        let ctx = PixelContext {
-            design,
-            plans: &plans,
-            prior: &prior.pixels[q],
-            borrowed_offset: None,
-            kappa0: falloff0,
-            allow_third: false,
-            max_iter: config.max_iter,
-        };
-        let mut fits = PixelFits::none();
-        if statistics {
-            match stats.as_ref().and_then(|s| s.samples(design, i, Some(sat))) {
-                Some((data, excluded)) => {
-                    fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
-                }
-                None => continue,
-            }
-        } else {
-            let y: Vec<f64> = ys[i]
-                .iter()
-                .map(|&v| {
-                    if v == 0 || v >= sat {
-                        f64::NAN
-                    } else {
-                        f64::from(v)
+    // Each pixel's fit on its own series (drawn above, in order, from one
+    // generator): independent, so on every core; the counts are sums.
+    let (ok, silent) = pixels
+        .par_iter()
+        .enumerate()
+        .map(|(i, &q)| {
+            let ctx = PixelContext {
+                design,
+                plans: &plans,
+                prior: &prior.pixels[q],
+                borrowed_offset: None,
+                kappa0: falloff0,
+                allow_third: false,
+                max_iter: config.max_iter,
+            };
+            let mut fits = PixelFits::none();
+            if statistics {
+                match stats.as_ref().and_then(|s| s.samples(design, i, Some(sat))) {
+                    Some((data, excluded)) => {
+                        fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
                     }
-                })
-                .collect();
-            let excluded = y.iter().filter(|v| v.is_nan()).count();
-            let data = SeriesSamples::new(design, &plans, &y, falloff0);
-            fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
-        }
-        ok += usize::from(found(&fits, &truth.pixels[q], two));
-        silent += usize::from(
-            fits.base
-                .flags
-                .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
-        );
-    }
+                    None => return (0, 0),
+                }
+            } else {
+                let y: Vec<f64> = ys[i]
+                    .iter()
+                    .map(|&v| {
+                        if v == 0 || v >= sat {
+                            f64::NAN
+                        } else {
+                            f64::from(v)
+                        }
+                    })
+                    .collect();
+                let excluded = y.iter().filter(|v| v.is_nan()).count();
+                let data = SeriesSamples::new(design, &plans, &y, falloff0);
+                fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
+            }
+            (
+                usize::from(found(&fits, &truth.pixels[q], two)),
+                usize::from(
+                    fits.base
+                        .flags
+                        .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
+                ),
+            )
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     let n = pixels.len().max(1) as f64;
     let found_fraction = ok as f64 / n;
     StageCheck {

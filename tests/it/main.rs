@@ -49,6 +49,7 @@ mod exit_statuses;
 mod figures;
 mod flat_plate;
 mod fuzz_readers;
+mod hostile_leftovers;
 mod input_ranges;
 mod measure_cli;
 mod measure_resume;

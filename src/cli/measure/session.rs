@@ -27,6 +27,7 @@ pub(super) fn serve_measurement(
         stop,
         screen,
         &args.out.join("result"),
+        &args.allow_host,
     )?;
     if !args.no_reconstruct {
         served.console.set_spectral(Spectral::Streaming {

@@ -135,9 +135,10 @@ pub(super) fn design_frames(
     // needs the low and middle τ (the periodogram's main lobe and a ladder
     // the fit cannot skip a fringe on), so shorter ladders are tried too.
     let mut best: Option<Constrained> = None;
+    let mut seen = Seen::default();
     for frac in START_LADDERS {
         let tau_u = (frac * tau_max).min(top);
-        let Some(c) = with_start(station, n, opts, prob, w_star, tau_u, views)? else {
+        let Some(c) = with_start(station, n, opts, prob, w_star, tau_u, views, &mut seen)? else {
             continue;
         };
         if best.as_ref().is_none_or(|b| c.0 < b.0) {
@@ -159,11 +160,37 @@ pub(super) fn design_frames(
     })
 }
 
+/// Schedules already judged in one [`design_frames`] call, with the
+/// verdict: every ladder's share 0 is the same rounded A-optimum, and a
+/// share may round to a schedule another share or ladder gave. The
+/// judgement is a function of the frames alone (its noise seed included),
+/// so it is looked up, not run again.
+#[derive(Default)]
+struct Seen(Vec<(Vec<FrameInfo>, bool)>);
+
+impl Seen {
+    fn admissible(
+        &mut self,
+        station: &Station,
+        frames: Vec<FrameInfo>,
+        opts: &DesignOptions,
+        views: &Views,
+    ) -> Result<bool, PlanError> {
+        if let Some((_, ok)) = self.0.iter().find(|(f, _)| *f == frames) {
+            return Ok(*ok);
+        }
+        let ok = admissible(station, &frames, opts, views)?;
+        self.0.push((frames, ok));
+        Ok(ok)
+    }
+}
+
 /// The A-optimum `w_star` mixed with the start component uniform over the
 /// candidates up to `tau_u`, at the smallest share that makes the rounded
 /// schedule of `n` frames admissible; `None` where the ladder is too short
 /// (fewer than 8 candidates per direction), no share is admissible, or the
 /// frames leave a sample pixel's information singular.
+#[allow(clippy::too_many_arguments)]
 fn with_start(
     station: &Station,
     n: usize,
@@ -172,6 +199,7 @@ fn with_start(
     w_star: &[f64],
     tau_u: f64,
     views: &Views,
+    seen: &mut Seen,
 ) -> Result<Option<Constrained>, PlanError> {
     let inside = prob.candidates.iter().filter(|c| c.tau <= tau_u).count();
     if inside < 8 * opts.directions_deg.len() {
@@ -195,7 +223,7 @@ fn with_start(
         log::debug!("design of {n} frames: trying share {alpha} of uniform τ ≤ {tau_u}");
         round(&prob.candidates, &mix(alpha), n)
     };
-    let Some(hi) = smallest_share(|alpha| admissible(station, &at(alpha), opts, views))? else {
+    let Some(hi) = smallest_share(|alpha| seen.admissible(station, at(alpha), opts, views))? else {
         return Ok(None);
     };
     let frames = at(hi);

@@ -3,6 +3,8 @@
 //! A-optimal weights over them (the multiplicative algorithm) and the
 //! rounding of weights to frames.
 
+use rayon::prelude::*;
+
 use crate::acquire::acquisition::FrameInfo;
 use crate::budget::scene;
 use crate::optics::station::Station;
@@ -96,25 +98,27 @@ impl Problem {
     /// Φ(w) and d_c for one frame in total (`Σ w = 1`); `None` when some
     /// pixel's information is singular.
     pub(super) fn criterion(&self, w: &[f64]) -> Option<(f64, Vec<f64>)> {
+        // Each pixel's share on every core; then summed in pixel order, each
+        // term added as a sequential loop adds it (the same bits at any
+        // thread count).
+        let shares: Vec<Option<(f64, Vec<f64>)>> = self
+            .pixels
+            .par_iter()
+            .zip(&self.grads)
+            .map(|((n, uv), g)| pixel_share(*n, uv, g, w))
+            .collect();
         let mut phi = 0.0;
         let mut d = vec![0.0; w.len()];
-        for ((n, uv), g) in self.pixels.iter().zip(&self.grads) {
-            let mut f = nalgebra::DMatrix::<f64>::zeros(*n, *n);
-            for (gc, &wc) in g.iter().zip(w) {
-                if wc > 0.0 {
-                    let v = nalgebra::DVector::from_column_slice(gc);
-                    f += wc * &v * v.transpose();
-                }
+        for (share, (_, uv)) in shares.into_iter().zip(&self.pixels) {
+            let (p, zz) = share?;
+            phi += p;
+            if uv.is_empty() {
+                continue;
             }
-            let inv = f.cholesky()?.inverse();
-            phi += uv.iter().map(|&a| inv[(a, a)]).sum::<f64>();
-            // d_c = Σ_a (F⁻¹ J_c)_a² over the picked a.
-            let rows: Vec<nalgebra::DVector<f64>> =
-                uv.iter().map(|&a| inv.row(a).transpose()).collect();
-            for (gc, dc) in g.iter().zip(d.iter_mut()) {
-                for r in &rows {
-                    let z: f64 = r.iter().zip(gc).map(|(x, y)| x * y).sum();
-                    *dc += z * z;
+            // d_c = Σ_a (F⁻¹ J_c)_a² over the picked a, per pixel.
+            for (dc, z) in d.iter_mut().zip(zz.chunks_exact(uv.len())) {
+                for zi in z {
+                    *dc += zi;
                 }
             }
         }
@@ -146,6 +150,41 @@ impl Problem {
         }
         Ok((w, lower))
     }
+}
+
+/// One pixel's `tr(K F⁻¹ Kᵀ)` and, per candidate c and picked parameter a,
+/// `(F⁻¹ J_c)_a²` (candidate-major), for `n` parameters, the picked `uv`,
+/// gradients `g` and weights `w`; `None` where F is singular. F is built in
+/// its lower triangle only (all the Cholesky factorisation reads), each
+/// element rounded as `f += (w_c J_c) J_cᵀ` rounds it: the product
+/// `(w_c J_ci) J_cj`, then the sum.
+fn pixel_share(n: usize, uv: &[usize], g: &[Vec<f64>], w: &[f64]) -> Option<(f64, Vec<f64>)> {
+    let mut f = nalgebra::DMatrix::<f64>::zeros(n, n);
+    let fs = f.as_mut_slice();
+    let mut s = vec![0.0; n];
+    for (gc, &wc) in g.iter().zip(w) {
+        if wc > 0.0 {
+            for (si, &gi) in s.iter_mut().zip(gc) {
+                *si = wc * gi;
+            }
+            for (j, (col, &gj)) in fs.chunks_exact_mut(n).zip(gc).enumerate() {
+                for (fij, &si) in col[j..].iter_mut().zip(&s[j..]) {
+                    *fij += si * gj;
+                }
+            }
+        }
+    }
+    let inv = f.cholesky()?.inverse();
+    let phi = uv.iter().map(|&a| inv[(a, a)]).sum::<f64>();
+    let rows: Vec<nalgebra::DVector<f64>> = uv.iter().map(|&a| inv.row(a).transpose()).collect();
+    let mut zz = Vec::with_capacity(g.len() * rows.len());
+    for gc in g {
+        for r in &rows {
+            let z: f64 = r.iter().zip(gc).map(|(x, y)| x * y).sum();
+            zz.push(z * z);
+        }
+    }
+    Some((phi, zz))
 }
 
 /// Frames for weights `w` over the candidates: cumulative (systematic)
