@@ -128,7 +128,9 @@ pub(super) fn check_surfaces(
             .map_err(|e| invalid(path, "outline", e.to_string()))?;
         let ours = q.coefficients(&c.coefficients_nm);
         let scale = ours.iter().fold(1.0f64, |m, a| m.max(a.abs()));
-        if let Some(k) = (0..n).find(|&k| !((given[k] - ours[k]).abs() <= AGREEMENT * scale)) {
+        // NaN disagrees too.
+        let agrees = |k: usize| (given[k] - ours[k]).abs() <= AGREEMENT * scale;
+        if let Some(k) = (0..n).find(|&k| !agrees(k)) {
             return Err(invalid(
                 path,
                 &format!("{name}.orthonormal_coefficients_nm[{k}]"),

@@ -90,7 +90,8 @@ impl Orthonormal {
                 d -= l[(j, k)] * l[(j, k)];
             }
             let ratio = if d > 0.0 { d.sqrt() } else { 0.0 } / g[(0, 0)].sqrt();
-            if !(ratio > LEAST_PIVOT) {
+            let independent = ratio > LEAST_PIVOT;
+            if !independent {
                 return Err(OutlineError::TooNarrow {
                     shape: outline.shape.describe(),
                     terms,
