@@ -155,6 +155,7 @@ fn library_class(e: &(dyn std::error::Error + 'static)) -> Option<Class> {
         mfd::limits::TooLarge,
         mfd::live::LiveError,
         mfd::live::MeasurementError,
+        mfd::optics::outline::OutlineError,
         mfd::optics::station::StationError,
         mfd::optics::station::UncertaintyError,
         mfd::optics::zernike::ZernikeError,

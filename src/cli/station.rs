@@ -58,7 +58,7 @@ pub struct StationArgs {
     /// `mfd-station/3`'s `[element.outline]`, docs/proposals/outline.md).
     /// The aperture radius becomes the rectangle's half-diagonal: the
     /// least Zernike disk that contains it.
-    #[arg(long, value_parser = super::check::positive, value_delimiter = ',', num_args = 2)]
+    #[arg(long, value_parser = super::check::positive, value_delimiter = ',', num_args = 1)]
     rectangle_mm: Option<Vec<f64>>,
     /// The rectangle's rotation about the aperture centre, degrees from +x
     /// towards +y.
@@ -95,7 +95,13 @@ pub fn run(args: &StationArgs) -> anyhow::Result<()> {
     if let [rx, ry] = args.element_tilt_deg[..] {
         station.element.pose.tilt_deg = [rx, ry];
     }
-    if let Some([a, b]) = args.rectangle_mm.as_deref().map(|v| [v[0], v[1]]) {
+    if let Some(v) = args.rectangle_mm.as_deref() {
+        let &[a, b] = v else {
+            return Err(super::exit::usage(anyhow::anyhow!(
+                "--rectangle-mm: expected two sides A,B in mm, found {} values",
+                v.len()
+            )));
+        };
         station.element.outline = Shape::Rectangle {
             sides_mm: [a, b],
             rotation_deg: args.rectangle_rotation_deg,

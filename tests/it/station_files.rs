@@ -78,7 +78,8 @@ fn impossible_stations_name_the_field() {
         "screen.v_axis",
     );
     rejects(
-        &t.replace("format = \"mfd-station/1\"", "format = \"mfd-station/3\""),
+        // Version 3 is the outline proposal (docs/proposals/outline.md).
+        &t.replace("format = \"mfd-station/1\"", "format = \"mfd-station/4\""),
         "format",
     );
     rejects(
