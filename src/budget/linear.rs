@@ -17,8 +17,8 @@
 
 use std::collections::HashSet;
 
+use crate::kernels::ordered::{chunk_sum, SUM_CHUNK};
 use nalgebra::{DMatrix, DVector};
-use rayon::prelude::*;
 
 use super::station_dual::{StationDual, DOFS, WIDTH};
 use super::DofEntry;
@@ -144,15 +144,13 @@ pub fn linearise(
     let n = p + DOFS + 1;
     // Every parallel sum here is collected in chunk order and added in it:
     // the same inputs give the same budget bit for bit.
-    let grams: Vec<_> = pixels
-        .par_chunks(128)
-        .map(|chunk| rows.gram(chunk))
-        .collect();
-    let (gram, n_resid, failed) = grams
-        .into_iter()
-        .fold((DMatrix::zeros(n, n), 0, [0; 2]), |(g, r, f), (h, s, e)| {
-            (g + h, r + s, [f[0] + e[0], f[1] + e[1]])
-        });
+    let (gram, n_resid, failed) = chunk_sum(
+        &pixels,
+        SUM_CHUNK,
+        (DMatrix::zeros(n, n), 0, [0; 2]),
+        |chunk| rows.gram(chunk),
+        |(g, r, f), (h, s, e)| (g + h, r + s, [f[0] + e[0], f[1] + e[1]]),
+    );
     let a = gram.view((0, 0), (p, p)).into_owned();
     let b = gram.view((0, p), (p, DOFS)).into_owned();
     let c = gram.view((p, p), (DOFS, DOFS)).into_owned();
@@ -162,16 +160,15 @@ pub fn linearise(
         condition_number: f64::INFINITY,
     })?;
     let s = chol.solve(&b);
-    let projected: Vec<_> = pixels
-        .par_chunks(128)
-        .map(|chunk| rows.projected(chunk, &s))
-        .collect();
-    let (g, h, xr) = projected.into_iter().fold(
+    let (g, h, xr) = chunk_sum(
+        &pixels,
+        SUM_CHUNK,
         (
             DMatrix::zeros(DOFS, DOFS),
             DMatrix::zeros(p, DOFS),
             DVector::zeros(DOFS),
         ),
+        |chunk| rows.projected(chunk, &s),
         |(g, h, x), (g2, h2, x2)| (g + g2, h + h2, x + x2),
     );
     let ah = chol.solve(&h);

@@ -11,6 +11,7 @@
 pub mod cholesky;
 mod fastcos;
 pub mod lm;
+pub mod ordered;
 
 pub use cholesky::SmallCholesky;
 pub use fastcos::{cos_cycles, exp_fast, exp_fast_with, madd, sincos_cycles, sincos_cycles_with};

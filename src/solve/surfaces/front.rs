@@ -4,7 +4,6 @@
 //! until the reflection points stop moving (paper Eq. 1, 9–10).
 
 use nalgebra::{DMatrix, DVector, Point3};
-use rayon::prelude::*;
 
 use super::{Observations, SurfaceError};
 use crate::optics::station::Station;
@@ -44,9 +43,11 @@ fn fit_slopes_parallel(
     let zero = || (DMatrix::<f64>::zeros(p, p), DVector::<f64>::zeros(p));
     // Summed in chunk order (collected first): a reduction joined in the
     // order work stealing finishes would change the last bits run to run.
-    let parts: Vec<(DMatrix<f64>, DVector<f64>)> = pts
-        .par_chunks(256)
-        .map(|chunk| {
+    let (a, b) = crate::kernels::ordered::chunk_sum(
+        pts,
+        crate::kernels::ordered::SUM_CHUNK,
+        zero(),
+        |chunk| {
             let mut cols = DMatrix::<f64>::zeros(p, 2 * chunk.len());
             let mut rhs = DVector::<f64>::zeros(2 * chunk.len());
             let (mut v, mut gx, mut gy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -66,11 +67,9 @@ fn fit_slopes_parallel(
             a.gemm(1.0, &cols, &cols.transpose(), 0.0);
             b.gemv(1.0, &cols, &rhs, 0.0);
             (a, b)
-        })
-        .collect();
-    let (a, b) = parts
-        .into_iter()
-        .fold(zero(), |x, y| (x.0 + y.0, x.1 + y.1));
+        },
+        |x, y| (x.0 + y.0, x.1 + y.1),
+    );
     let eig = a.clone().symmetric_eigen().eigenvalues;
     let (lo, hi) = (eig.min(), eig.max());
     let condition_number = if lo > 0.0 {

@@ -164,12 +164,13 @@ pub fn accumulate(
     // The chunks' sums are added in chunk order, not in the order rayon's
     // work stealing happens to join them: floating-point addition does not
     // associate, and the same inputs must give the same surfaces bit for bit.
-    let parts: Vec<Normal> = obs
-        .pixels
-        .par_chunks(128)
-        .map(|chunk| accumulate_chunk(chunk, obs, station, plate, layout, p))
-        .collect();
-    parts.into_iter().fold(Normal::zeros(p), Normal::merge)
+    crate::kernels::ordered::chunk_sum(
+        &obs.pixels,
+        crate::kernels::ordered::SUM_CHUNK,
+        Normal::zeros(p),
+        |chunk| accumulate_chunk(chunk, obs, station, plate, layout, p),
+        Normal::merge,
+    )
 }
 
 #[allow(clippy::needless_range_loop)]
