@@ -47,7 +47,7 @@ mod tests {
     fn the_sum_is_the_sequential_one_in_chunk_order() {
         // Values whose sum depends on the order of addition.
         let v: Vec<f64> = (0..10_000)
-            .map(|k| (k as f64 * 0.37).sin() * 10f64.powi((k % 17) as i32 - 8))
+            .map(|k: i32| (f64::from(k) * 0.37).sin() * 10f64.powi(k % 17 - 8))
             .collect();
         let want = v
             .chunks(7)
