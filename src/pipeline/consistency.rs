@@ -156,18 +156,23 @@ pub fn why_nothing(
 
 /// The manifest's frames per direction and their τ range, in words
 /// ("frames per direction: 45°: 200 (τ 0.5–100), 30°: 1 (τ 37)").
+/// The τ of direction `d`'s frames, in capture order.
+fn taus_of(design: &Design, d: usize) -> Vec<f64> {
+    design
+        .frames
+        .iter()
+        .filter(|f| f.dir == d)
+        .map(|f| f.tau)
+        .collect()
+}
+
 fn frames_per_direction(design: &Design) -> String {
     let each: Vec<String> = design
         .directions_deg
         .iter()
         .enumerate()
         .map(|(d, deg)| {
-            let taus: Vec<f64> = design
-                .frames
-                .iter()
-                .filter(|f| f.dir == d)
-                .map(|f| f.tau)
-                .collect();
+            let taus = taus_of(design, d);
             let lo = taus.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = taus.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             let range = if lo == hi {
@@ -348,12 +353,7 @@ fn alias_spacing(station: &Station, design: &Design) -> Option<f64> {
         .iter()
         .enumerate()
         .filter_map(|(d, &deg)| {
-            let taus: Vec<f64> = design
-                .frames
-                .iter()
-                .filter(|f| f.dir == d)
-                .map(|f| f.tau)
-                .collect();
+            let taus = taus_of(design, d);
             let axis = FringeAxis::new(deg, station.screen.width, station.screen.height);
             crate::plan::ambiguity::direction_ambiguity(&taus, 0.0, &axis)
                 .1

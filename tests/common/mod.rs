@@ -31,6 +31,18 @@ pub fn mfd_ok(args: &[&str]) -> String {
     text
 }
 
+/// Runs the `mfd` binary with `args`: its exit status (-1 for a signal)
+/// and what it printed, standard output then error.
+pub fn mfd_status(args: &[&str]) -> (i32, String) {
+    let out = mfd(args);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.code().unwrap_or(-1), text)
+}
+
 /// Runs the `mfd` binary with `args` and returns what it did.
 pub fn mfd(args: &[&str]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_mfd"))

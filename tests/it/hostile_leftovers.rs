@@ -5,17 +5,7 @@
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use crate::common::{mfd, public_small};
-
-fn run(args: &[&str]) -> (i32, String) {
-    let out = mfd(args);
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.code().unwrap_or(-1), text)
-}
+use crate::common::{mfd_status as run, public_small};
 
 /// An acquisition rendered by `mfd simulate` on the small public station
 /// (48 × 48 camera, τ 0.2…200 step 0.2 on both diagonals, 1 % noise), its

@@ -9,7 +9,7 @@ use crate::common;
 
 use std::path::{Path, PathBuf};
 
-use crate::common::mfd;
+use crate::common::mfd_status as run;
 
 /// The independent implementation's small acquisition (48 × 48 camera,
 /// τ 0.5…100 step 0.5, both diagonals), copied into `dir` with every
@@ -26,16 +26,6 @@ fn fixture_copy(dir: &Path, edit: &dyn Fn(&str) -> String) -> PathBuf {
     let edited: Vec<String> = manifest.lines().map(edit).collect();
     std::fs::write(acq.join("acquisition.toml"), edited.join("\n") + "\n").unwrap();
     acq
-}
-
-fn run(args: &[&str]) -> (i32, String) {
-    let out = mfd(args);
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.code().unwrap_or(-1), text)
 }
 
 /// `mfd reconstruct ACQ --out OUT EXTRA…`.

@@ -13,7 +13,7 @@ use mfd::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use nalgebra::{Point3, Unit, Vector3};
 
 pub mod chain;
-mod soak;
+pub mod soak;
 
 fn v2_with(element_lines: &str) -> String {
     paper_text()

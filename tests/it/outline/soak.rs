@@ -12,7 +12,6 @@
 //! test profile), `MFD_OUTLINE_SOAK_SEED=s`; failing seeds are appended to
 //! `target/outline-soak-failures.txt`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use mfd::acquire::patterns::Schedule;
@@ -23,6 +22,7 @@ use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 use crate::wedge::chain::{binned_paper_station, run_scored, Scene};
+use crate::wedge::soak::{env_u64, save_failure_to};
 
 /// As the wedge soak's: the RMS of ~33 unit z-scores within 0.6–1.4 at
 /// 4σ, wider for the few pixels and terms a small outline keeps.
@@ -114,25 +114,7 @@ impl Draw {
 
 fn save_failure(draw: &Draw, why: &str) {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/outline-soak-failures.txt");
-    eprintln!("seed {} FAILED: {why}\n  {draw:?}", draw.seed);
-    if let Some(dir) = path.parent() {
-        let _ = std::fs::create_dir_all(dir);
-    }
-    if let Ok(mut f) = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&path)
-    {
-        let _ = writeln!(f, "seed {} failed: {why}\n  {draw:?}", draw.seed);
-    }
-}
-
-fn env_u64(name: &str) -> Option<u64> {
-    std::env::var(name).ok().map(|v| {
-        v.trim()
-            .parse()
-            .unwrap_or_else(|_| panic!("{name}={v}: expected a whole number"))
-    })
+    save_failure_to(&path, draw.seed, draw, why);
 }
 
 #[test]

@@ -19,7 +19,7 @@
 //!   (default `target/wedge-soak-failures.txt`).
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use mfd::acquire::patterns::Schedule;
 use mfd::optics::station::{
@@ -157,7 +157,8 @@ impl Draw {
     }
 }
 
-fn env_u64(name: &str) -> Option<u64> {
+/// `name`'s value as a whole number, if set (the soaks' knobs).
+pub fn env_u64(name: &str) -> Option<u64> {
     std::env::var(name).ok().map(|v| {
         v.trim()
             .parse()
@@ -165,22 +166,28 @@ fn env_u64(name: &str) -> Option<u64> {
     })
 }
 
-fn save_failure(draw: &Draw, why: &str) {
-    let path = std::env::var_os("MFD_WEDGE_SOAK_FAILURES").map_or_else(
-        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/wedge-soak-failures.txt"),
-        PathBuf::from,
-    );
-    eprintln!("seed {} FAILED: {why}\n  {draw:?}", draw.seed);
+/// Prints a failing seed and appends it with its draw to `path` (the
+/// soaks' failure files).
+pub fn save_failure_to(path: &Path, seed: u64, draw: &dyn std::fmt::Debug, why: &str) {
+    eprintln!("seed {seed} FAILED: {why}\n  {draw:?}");
     if let Some(dir) = path.parent() {
         let _ = std::fs::create_dir_all(dir);
     }
     if let Ok(mut f) = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
-        .open(&path)
+        .open(path)
     {
-        let _ = writeln!(f, "seed {} failed: {why}\n  {draw:?}", draw.seed);
+        let _ = writeln!(f, "seed {seed} failed: {why}\n  {draw:?}");
     }
+}
+
+fn save_failure(draw: &Draw, why: &str) {
+    let path = std::env::var_os("MFD_WEDGE_SOAK_FAILURES").map_or_else(
+        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/wedge-soak-failures.txt"),
+        PathBuf::from,
+    );
+    save_failure_to(&path, draw.seed, draw, why);
 }
 
 #[test]
