@@ -85,8 +85,10 @@ pub struct StationDual {
     pub rig: Rig<WIDTH>,
     /// Rotation taking camera-frame vectors to the element frame.
     element_from_camera: M3<WIDTH>,
-    /// Focal length in camera pixels and the principal point, px.
-    focal_px: D,
+    /// Focal lengths in camera pixels along the columns and the rows
+    /// (`fy = aspect · fx`; the aspect ratio is not a degree of freedom of
+    /// `mfd-station-uncertainty/1`), and the principal point, px.
+    focal_px: [D; 2],
     principal_px: [D; 2],
     /// Distortion coefficients `k1..k3, p1, p2` (zero where the station has none).
     k: [D; 3],
@@ -157,7 +159,10 @@ impl StationDual {
                 central_hessian: true,
             },
             element_from_camera: mat_mul(&back, &world_from_camera),
-            focal_px: param(cam.focal_length_mm, FocalLength).scale(1.0 / cam.pixel_pitch_mm),
+            focal_px: {
+                let fx = param(cam.focal_length_mm, FocalLength).scale(1.0 / cam.pixel_pitch_mm);
+                [fx, fx.scale(cam.aspect())]
+            },
             principal_px: [
                 param(cam.principal_point_px.x, Cx),
                 param(cam.principal_point_px.y, Cy),
@@ -174,7 +179,7 @@ impl StationDual {
     pub fn ray(&self, i: u32, j: u32) -> Option<V3<WIDTH>> {
         let xy_px = [f64::from(i) + 0.5, f64::from(j) + 0.5];
         let xd: [D; 2] =
-            std::array::from_fn(|a| (D::c(xy_px[a]) - self.principal_px[a]) / self.focal_px);
+            std::array::from_fn(|a| (D::c(xy_px[a]) - self.principal_px[a]) / self.focal_px[a]);
         let (x0, y0) = match &self.distortion {
             None => (xd[0].v, xd[1].v),
             Some(d) => d.undistort(xd[0].v, xd[1].v)?,

@@ -13,7 +13,7 @@ use super::adjust::adjust;
 use super::error::CalibrationError;
 use super::input::CalibrationInput;
 use super::params::{Param, State, WorldFrame, STATION_DOFS};
-use super::report::{Report, StepReport};
+use super::report::{Estimate, Report, StepReport};
 use super::resect::resect;
 use super::residuals::{flat_reflection_uv, Blocks};
 use crate::optics::station::{Dof, Pose, Station, StationUncertainty};
@@ -142,6 +142,9 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
     if input.nominal.screen.cover_glass.is_some() {
         all.push(Param::CoverGlassThickness);
     }
+    if input.nominal.camera.aspect_ratio.is_some() {
+        all.push(Param::AspectRatio);
+    }
     let joint = adjust(
         input,
         screen.state.clone(),
@@ -155,7 +158,26 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration, CalibrationErr
         StepReport::new("screen", input, &screen, screen_blocks),
         StepReport::new("joint", input, &joint, Blocks::ALL),
     ];
-    let report = Report::new(input, steps);
+    let mut report = Report::new(input, steps);
+    for (k, p) in joint.params.iter().enumerate() {
+        let value = match p {
+            Param::CoverGlassThickness => joint
+                .state
+                .station
+                .screen
+                .cover_glass
+                .map(|g| g.thickness_mm),
+            Param::AspectRatio => joint.state.station.camera.aspect_ratio,
+            _ => None,
+        };
+        if let Some(value) = value {
+            report.beside_the_uncertainty_file.push(Estimate {
+                name: p.name(),
+                value,
+                std: joint.covariance[(k, k)].max(0.0).sqrt(),
+            });
+        }
+    }
     // Validated as a loaded file is, and as a reader will see it (axes
     // normalised).
     let station = Station::from_file(

@@ -82,7 +82,7 @@ pub(super) fn layout_findings(session: &Session, sigma_px: f64, report: &mut Che
         frame,
         station: session.nominal.clone(),
     };
-    let params = camera_params();
+    let params = camera_params(&session.nominal.camera);
     let blocks = Blocks::TARGETS;
     let Ok(n) = information(&input, &state, &params, blocks) else {
         return;
@@ -178,6 +178,7 @@ fn is_lens_only(name: &str) -> bool {
         "camera.p2",
         "camera.cx_px",
         "camera.cy_px",
+        "camera.aspect_ratio",
     ]
     .contains(&name)
 }

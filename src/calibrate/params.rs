@@ -24,6 +24,10 @@ pub enum Param {
     /// rays determine it, but not a degree of freedom of the uncertainty
     /// file (its covariance is marginalised out there, like the plane's).
     CoverGlassThickness,
+    /// The camera's `fy / fx` (proposal `docs/proposals/aspect.md`):
+    /// estimated where the nominal station declares it, and, like the cover
+    /// glass, not a degree of freedom of the uncertainty file.
+    AspectRatio,
 }
 
 /// What the adjustment knows of a station degree of freedom before any
@@ -99,6 +103,16 @@ const COVER_GLASS_STEP_MM: f64 = 1e-5;
 /// See [`COVER_GLASS_STEP_MM`].
 pub const COVER_GLASS_PRIOR_MM: f64 = 0.1;
 
+/// The aspect ratio's difference step: 1e-6 of fx moves a sensor's corner
+/// pixel (≤ 3000 px off centre) by ≤ 3e-3 px, far above the residuals'
+/// rounding and far below any σ a session reaches (the focal length's
+/// step is 6e-7 of a 16 mm lens).
+const ASPECT_STEP: f64 = 1e-6;
+/// The range a declared aspect ratio may be off by: a datasheet's square
+/// pixels or an earlier calibration, to 1 % (OpenCSP's cameras differ from
+/// square by 0.1 %).
+pub const ASPECT_PRIOR: f64 = 0.01;
+
 /// The prior of a station DOF (`None` for the thickness and the index,
 /// which a calibration takes as given).
 pub fn prior(dof: Dof) -> Option<&'static DofPrior> {
@@ -114,6 +128,7 @@ impl Param {
             Param::PlaneSlopeY => "frame.slope_y",
             Param::Station(d) => d.name(),
             Param::CoverGlassThickness => "screen.cover_glass.thickness_mm",
+            Param::AspectRatio => "camera.aspect_ratio",
         }
     }
 
@@ -125,6 +140,7 @@ impl Param {
             "frame.slope_x" => Some(Param::PlaneSlopeX),
             "frame.slope_y" => Some(Param::PlaneSlopeY),
             "screen.cover_glass.thickness_mm" => Some(Param::CoverGlassThickness),
+            "camera.aspect_ratio" => Some(Param::AspectRatio),
             _ => Dof::parse(name)
                 .and_then(prior)
                 .map(|d| Param::Station(d.dof)),
@@ -139,6 +155,7 @@ impl Param {
             Param::PlaneSlopeY => PLANE_STEPS[2],
             Param::Station(d) => prior(*d).map_or(1e-6, |p| p.step),
             Param::CoverGlassThickness => COVER_GLASS_STEP_MM,
+            Param::AspectRatio => ASPECT_STEP,
         }
     }
 
@@ -148,6 +165,7 @@ impl Param {
         match self {
             Param::Station(d) => prior(*d).map(|p| p.prior_std),
             Param::CoverGlassThickness => Some(COVER_GLASS_PRIOR_MM),
+            Param::AspectRatio => Some(ASPECT_PRIOR),
             _ => None,
         }
     }
@@ -235,6 +253,9 @@ impl State {
                     g.thickness_mm += delta;
                 }
             }
+            Param::AspectRatio => {
+                s.station.camera.aspect_ratio = Some(s.station.camera.aspect() + delta);
+            }
         }
         s
     }
@@ -297,6 +318,7 @@ pub fn difference(from: &State, to: &State, params: &[Param]) -> Vec<f64> {
                 let t = |s: &State| s.station.screen.cover_glass.map_or(0.0, |g| g.thickness_mm);
                 t(to) - t(from)
             }
+            Param::AspectRatio => to.station.camera.aspect() - from.station.camera.aspect(),
             Param::Station(d) => match d {
                 Dof::CameraX => to.station.camera.position_mm.x - from.station.camera.position_mm.x,
                 Dof::CameraY => to.station.camera.position_mm.y - from.station.camera.position_mm.y,
@@ -386,6 +408,7 @@ mod tests {
             Param::PlaneSlopeX,
             Param::PlaneSlopeY,
             Param::CoverGlassThickness,
+            Param::AspectRatio,
         ]
         .into_iter()
         .chain(STATION_DOFS.iter().map(|d| Param::Station(d.dof)))

@@ -130,6 +130,21 @@ pub struct Report {
     pub steps: Vec<StepReport>,
     /// What the calibration takes as given or could not determine, in words.
     pub notes: Vec<String>,
+    /// The estimates `mfd-station-uncertainty/1` has no name for (the
+    /// cover glass's thickness, the camera's aspect ratio): their value
+    /// and σ from the joint step, here only.
+    pub beside_the_uncertainty_file: Vec<Estimate>,
+}
+
+/// One estimated parameter's value and 1 σ.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Estimate {
+    /// Its name ([`super::params::Param::name`]).
+    pub name: &'static str,
+    /// The calibrated value.
+    pub value: f64,
+    /// 1 σ from the joint step's covariance.
+    pub std: f64,
 }
 
 fn rms(values: impl Iterator<Item = f64>) -> (f64, usize) {
@@ -254,7 +269,19 @@ impl Report {
                 }
             ));
         }
-        Report { steps, notes }
+        if input.nominal.camera.aspect_ratio.is_some() {
+            notes.push(
+                "the nominal station declares the camera's aspect ratio (fy / fx): it is \
+                 estimated beside the focal length, but it is not a degree of freedom of \
+                 mfd-station-uncertainty/1 and its σ is in report.json only"
+                    .into(),
+            );
+        }
+        Report {
+            steps,
+            notes,
+            beside_the_uncertainty_file: Vec::new(),
+        }
     }
 
     /// `report.json`.

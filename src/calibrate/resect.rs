@@ -21,13 +21,18 @@ use crate::optics::station::{Camera, Distortion};
 /// The fewest targets a DLT solves with (11 unknowns, 2 equations each).
 pub const MIN_TARGETS: usize = 6;
 
-/// The camera's degrees of freedom, in [`STATION_DOFS`] order.
-pub fn camera_params() -> Vec<Param> {
-    STATION_DOFS
+/// The camera's degrees of freedom, in [`STATION_DOFS`] order, and its
+/// aspect ratio where the nominal station declares one.
+pub fn camera_params(nominal: &Camera) -> Vec<Param> {
+    let mut params: Vec<Param> = STATION_DOFS
         .iter()
         .filter(|d| d.dof.name().starts_with("camera."))
         .map(|d| Param::Station(d.dof))
-        .collect()
+        .collect();
+    if nominal.aspect_ratio.is_some() {
+        params.push(Param::AspectRatio);
+    }
+    params
 }
 
 /// A pinhole read off a projection matrix.
@@ -39,6 +44,8 @@ pub struct LinearCamera {
     pub world_from_camera: Rotation3<f64>,
     /// Focal length, px (the mean of the two axes').
     pub focal_px: f64,
+    /// `[fx, fy]`, px: the columns' and the rows' focal lengths.
+    pub focal_px_xy: [f64; 2],
     /// Principal point, px (pixel-centre convention, as the pixels given).
     pub principal_point_px: Point2<f64>,
 }
@@ -73,6 +80,7 @@ pub fn decompose(p: &Matrix3x4<f64>, world: &[Point3<f64>]) -> Option<LinearCame
         position_mm: Point3::from(centre),
         world_from_camera: camera_from_world.inverse(),
         focal_px: f,
+        focal_px_xy: [k[(0, 0)], k[(1, 1)]],
         principal_point_px: Point2::new(k[(0, 2)], k[(1, 2)]),
     })
 }
@@ -90,11 +98,19 @@ pub fn linear_start(input: &CalibrationInput, state: &State) -> Option<Camera> {
     let p = dlt(&world, &pixels)?;
     let lin = decompose(&p, &world)?;
     let nominal = &state.station.camera;
+    // A declared aspect ratio is estimated, so it starts from the DLT's;
+    // square pixels keep the mean of the two axes' focal lengths.
+    let [fx, fy] = lin.focal_px_xy;
+    let (focal_px, aspect_ratio) = match nominal.aspect_ratio {
+        Some(_) => (fx, Some(fy / fx)),
+        None => (lin.focal_px, None),
+    };
     let cam = Camera {
         position_mm: lin.position_mm,
         world_from_camera: lin.world_from_camera,
-        focal_length_mm: lin.focal_px * nominal.pixel_pitch_mm,
+        focal_length_mm: focal_px * nominal.pixel_pitch_mm,
         principal_point_px: lin.principal_point_px,
+        aspect_ratio,
         distortion: Some(nominal.distortion.unwrap_or(Distortion {
             k: [0.0; 3],
             p: [0.0; 2],
@@ -145,7 +161,8 @@ pub fn resect(input: &CalibrationInput, state: &State) -> Result<Adjusted, Calib
             start = dlt_state;
         }
     }
-    adjust(input, start, state, &camera_params(), blocks, "resection")
+    let params = camera_params(&state.station.camera);
+    adjust(input, start, state, &params, blocks, "resection")
 }
 
 fn reprojection_ss(input: &CalibrationInput, state: &State) -> f64 {
@@ -215,6 +232,13 @@ mod tests {
         assert!((r.matrix() - cam.world_from_camera.matrix()).norm() < 1e-9);
         assert!((f_px - cam.focal_px()).abs() < 1e-6);
         assert!((pp - cam.principal_point_px).norm() < 1e-6);
+        // fx ≠ fy: the two axes' focal lengths read apart, as OpenCV's.
+        let mut wide = cam.clone();
+        wide.aspect_ratio = Some(1.002);
+        let pixels: Vec<Point2<f64>> = world.iter().map(|p| wide.project(p).unwrap()).collect();
+        let lin = decompose(&dlt(&world, &pixels).unwrap(), &world).unwrap();
+        let [fx, fy] = wide.focal_px_xy();
+        assert!((lin.focal_px_xy[0] - fx).abs() < 1e-6 && (lin.focal_px_xy[1] - fy).abs() < 1e-6);
         let in_a_plane: Vec<Point3<f64>> =
             world.iter().map(|p| Point3::new(p.x, p.y, 5.0)).collect();
         assert!(coplanar(&in_a_plane));

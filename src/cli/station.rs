@@ -64,6 +64,12 @@ pub struct StationArgs {
     /// towards +y.
     #[arg(long, value_parser = super::check::range(-360.0, 360.0, "degrees of rotation"), default_value_t = 0.0, allow_negative_numbers = true, requires = "rectangle_mm")]
     rectangle_rotation_deg: f64,
+    /// The camera's fy / fx (the proposal `mfd-station/3`'s
+    /// `camera.aspect_ratio`, docs/proposals/aspect.md): from a calibration
+    /// by OpenCV or OpenCSP, fy divided by fx. Declared, a calibration
+    /// estimates it; absent, the pixels are square.
+    #[arg(long, value_parser = super::check::range(mfd::optics::station::ASPECT_RANGE[0], mfd::optics::station::ASPECT_RANGE[1], "fy / fx"))]
+    aspect_ratio: Option<f64>,
     /// Where to write the station.toml.
     #[arg(long)]
     out: PathBuf,
@@ -109,6 +115,7 @@ pub fn run(args: &StationArgs) -> anyhow::Result<()> {
         let half_diagonal = a.hypot(b) / 2.0;
         station.element.aperture_radius_mm = half_diagonal;
     }
+    station.camera.aspect_ratio = args.aspect_ratio;
     if station.needs_version_2() || station.needs_version_3() {
         // Through the file form: a tilted or wedged element is checked as a loaded one is.
         station = Station::from_file(&station.to_file(), &args.out)?;

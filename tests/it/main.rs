@@ -17,6 +17,7 @@ mod report_support;
 
 mod acquisition_io;
 mod architecture;
+mod aspect;
 mod bad_inputs;
 mod bad_sizes;
 mod bench_json;

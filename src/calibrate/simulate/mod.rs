@@ -20,7 +20,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use crate::calibrate::input::{CalibrationInput, FlatPixel, MarkedPixel, Target};
 use crate::calibrate::make::target_layout;
-use crate::calibrate::params::{prior, WorldFrame, COVER_GLASS_PRIOR_MM};
+use crate::calibrate::params::{prior, WorldFrame, ASPECT_PRIOR, COVER_GLASS_PRIOR_MM};
 use crate::calibrate::screen_mark::mark_focus;
 use crate::optics::refraction::reflect;
 use crate::optics::station::{Distortion, Dof, Station, StationError};
@@ -273,6 +273,10 @@ fn nominal(truth: &Station, rng: &mut Xoshiro256PlusPlus) -> Station {
     // The cover glass's thickness from a datasheet, off by its prior range.
     if let Some(g) = &mut s.screen.cover_glass {
         g.thickness_mm += gauss(rng, COVER_GLASS_PRIOR_MM);
+    }
+    // A declared aspect ratio (fx ≠ fy) off by its prior range.
+    if let Some(a) = &mut s.camera.aspect_ratio {
+        *a += gauss(rng, ASPECT_PRIOR);
     }
     s
 }

@@ -279,6 +279,7 @@ impl SymmetricLayout {
             height: h,
             principal_point_px: Point2::new(f64::from(w) / 2.0, f64::from(h) / 2.0),
             distortion: None,
+            aspect_ratio: None,
         };
         let [sw, sh] = display.resolution;
         let p = display.pixel_pitch_mm;

@@ -8,10 +8,10 @@ use serde::{Deserialize, Serialize};
 pub const STATION_FORMAT: &str = "mfd-station/1";
 /// The format tag of a version-2 station file (distortion, cover glass, pose).
 pub const STATION_FORMAT_V2: &str = "mfd-station/2";
-/// The format tag of a station file using the proposal
-/// `docs/proposals/outline.md` (the element's outline); not yet part of the
-/// interchange spec, written only when an outline other than the disk is
-/// given.
+/// The format tag of a station file using the proposals
+/// `docs/proposals/outline.md` (the element's outline) and
+/// `docs/proposals/aspect.md` (the camera's aspect ratio); not yet part of
+/// the interchange spec, written only when one of them is used.
 pub const STATION_FORMAT_V3: &str = "mfd-station/3";
 /// The one distortion model version 2 names.
 pub const BROWN_CONRADY: &str = "brown-conrady";
@@ -55,6 +55,10 @@ pub struct CameraFile {
         skip_serializing_if = "Option::is_none"
     )]
     pub principal_point_px: Option<[f64; 2]>,
+    /// `fy / fx` (proposal `mfd-station/3`, `docs/proposals/aspect.md`);
+    /// absent: square pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aspect_ratio: Option<f64>,
     /// `[camera.distortion]` (version 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion: Option<DistortionFile>,

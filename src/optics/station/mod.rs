@@ -7,7 +7,9 @@
 //! exactly version 1 (and is written as version 1). All lengths are
 //! millimetres in the world frame (see [`crate::conventions`]).
 
+mod aspect_check;
 mod build;
+mod camera;
 mod cover_glass;
 mod distortion;
 mod dof;
@@ -22,6 +24,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector3};
 
+pub use aspect_check::ASPECT_RANGE;
 pub use build::{bench_station, CameraProfile, DisplayProfile, SymmetricLayout};
 pub use cover_glass::CoverGlass;
 pub use distortion::Distortion;
@@ -95,73 +98,11 @@ pub struct Camera {
     pub principal_point_px: Point2<f64>,
     /// The lens's distortion (station v2); `None` is the ideal pinhole.
     pub distortion: Option<Distortion>,
-}
-
-impl Camera {
-    /// Unit direction, world frame, of the ray through the centre of pixel
-    /// (column `i`, row `j`), per the spec.
-    pub fn ray_direction(&self, i: u32, j: u32) -> Unit<Vector3<f64>> {
-        if self.distortion.is_some() {
-            return self.ray_through(f64::from(i) + 0.5, f64::from(j) + 0.5);
-        }
-        let p = self.pixel_pitch_mm;
-        let v_cam = Vector3::new(
-            (f64::from(i) + 0.5 - self.principal_point_px.x) * p,
-            (f64::from(j) + 0.5 - self.principal_point_px.y) * p,
-            self.focal_length_mm,
-        );
-        Unit::new_normalize(self.world_from_camera * v_cam)
-    }
-
-    /// Unit direction, world frame, of the ray that lands at the continuous
-    /// pixel position `(x_px, y_px)` (pixel-centre convention: the centre of
-    /// pixel `(i, j)` is `(i + 0.5, j + 0.5)`), through the distortion's
-    /// inverse. Validation guarantees the inverse over the sensor; outside
-    /// it, where Newton may not converge, the direction is NaN.
-    pub fn ray_through(&self, x_px: f64, y_px: f64) -> Unit<Vector3<f64>> {
-        let f = self.focal_px();
-        let xd = (x_px - self.principal_point_px.x) / f;
-        let yd = (y_px - self.principal_point_px.y) / f;
-        let (x, y) = match &self.distortion {
-            None => (xd, yd),
-            Some(d) => d.undistort(xd, yd).unwrap_or((f64::NAN, f64::NAN)),
-        };
-        Unit::new_unchecked((self.world_from_camera * Vector3::new(x, y, 1.0)).normalize())
-    }
-
-    /// The continuous pixel position where the world point `p` is imaged,
-    /// or `None` when it lies behind the camera.
-    pub fn project(&self, p: &Point3<f64>) -> Option<Point2<f64>> {
-        let q = self.world_from_camera.inverse() * (p - self.position_mm);
-        if q.z <= 0.0 {
-            return None;
-        }
-        let (x, y) = (q.x / q.z, q.y / q.z);
-        let (xd, yd) = match &self.distortion {
-            None => (x, y),
-            Some(d) => d.distort(x, y),
-        };
-        let f = self.focal_px();
-        Some(Point2::new(
-            self.principal_point_px.x + f * xd,
-            self.principal_point_px.y + f * yd,
-        ))
-    }
-
-    /// `F = focal_length_mm / pixel pitch`: the focal length in pixels.
-    pub fn focal_px(&self) -> f64 {
-        self.focal_length_mm / self.pixel_pitch_mm
-    }
-
-    /// The optical axis, world frame.
-    pub fn axis(&self) -> Unit<Vector3<f64>> {
-        Unit::new_normalize(self.world_from_camera * Vector3::z())
-    }
-
-    /// Number of pixels.
-    pub fn pixel_count(&self) -> usize {
-        self.width as usize * self.height as usize
-    }
+    /// `fy / fx`, the focal length in rows over that in columns (proposal
+    /// `mfd-station/3`, `docs/proposals/aspect.md`), as a calibration by
+    /// OpenCV or OpenCSP gives it; `None`: square pixels, not declared
+    /// (versions 1 and 2), which projects exactly as `Some(1.0)`.
+    pub aspect_ratio: Option<f64>,
 }
 
 /// The fringe screen: a plane of square pixels.
@@ -386,10 +327,10 @@ impl Station {
         s
     }
 
-    /// Whether the proposal's outline is in use (the writer then writes
-    /// `mfd-station/3`).
+    /// Whether a field of the proposals is in use (the element's outline,
+    /// the camera's aspect ratio; the writer then writes `mfd-station/3`).
     pub fn needs_version_3(&self) -> bool {
-        !self.element.outline.is_circle()
+        !self.element.outline.is_circle() || self.camera.aspect_ratio.is_some()
     }
 
     /// Whether any version-2 field is in use (the writer then writes
@@ -431,6 +372,7 @@ impl Station {
                 pixel_pitch_um: c.pixel_pitch_mm * 1000.0,
                 resolution: [c.width, c.height],
                 principal_point_px: Some([c.principal_point_px.x, c.principal_point_px.y]),
+                aspect_ratio: c.aspect_ratio,
                 distortion: c.distortion.map(|d| DistortionFile {
                     model: file::BROWN_CONRADY.to_string(),
                     k: Some(d.k),

@@ -140,6 +140,8 @@ pub(super) fn station(file: &StationFile, path: &Path) -> Result<Station, Statio
         version_1_only(&check, file)?;
     }
     let mut camera = camera(&check, file)?;
+    camera.aspect_ratio =
+        super::aspect_check::checked(path, &file.format, file.camera.aspect_ratio)?;
     camera.distortion = distortion(&check, file, &camera)?;
     let screen = screen(&check, file)?;
     let element = element(&check, file)?;
@@ -217,12 +219,12 @@ fn distortion(
     if dist.is_zero() {
         return Ok(None);
     }
-    let f = camera.focal_px();
+    let [fx, fy] = camera.focal_px_xy();
     let (w, h) = (f64::from(camera.width), f64::from(camera.height));
     let c = camera.principal_point_px;
     let rd_max = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
         .iter()
-        .map(|&(x, y)| ((x - c.x) / f).hypot((y - c.y) / f))
+        .map(|&(x, y)| ((x - c.x) / fx).hypot((y - c.y) / fy))
         .fold(0.0, f64::max);
     if let Some(problem) = dist.not_monotone_below(rd_max) {
         return check.fail("camera.distortion.k", problem);
@@ -232,8 +234,8 @@ fn distortion(
     // sensor (edges included) must converge and distort back to it.
     for a in 0..=INVERSE_GRID {
         for b in 0..=INVERSE_GRID {
-            let xd = (w * f64::from(a) / f64::from(INVERSE_GRID) - c.x) / f;
-            let yd = (h * f64::from(b) / f64::from(INVERSE_GRID) - c.y) / f;
+            let xd = (w * f64::from(a) / f64::from(INVERSE_GRID) - c.x) / fx;
+            let yd = (h * f64::from(b) / f64::from(INVERSE_GRID) - c.y) / fy;
             let ok = dist.undistort(xd, yd).is_some_and(|(x, y)| {
                 let j = dist.jacobian(x, y);
                 j[0][0] * j[1][1] - j[0][1] * j[1][0] > 0.0
@@ -244,8 +246,8 @@ fn distortion(
                     format!(
                         "the distortion's inverse is not unique over the sensor: at pixel \
                          ({:.0}, {:.0}) Newton finds no ideal point with a non-folding map",
-                        xd * f + c.x,
-                        yd * f + c.y
+                        xd * fx + c.x,
+                        yd * fy + c.y
                     ),
                 );
             }
@@ -322,6 +324,7 @@ fn camera(check: &Check, file: &StationFile) -> Result<Camera, StationError> {
         height: h,
         principal_point_px: Point2::from(pp),
         distortion: None,
+        aspect_ratio: None,
     })
 }
 

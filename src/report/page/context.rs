@@ -77,8 +77,13 @@ impl Context {
             rows.push(vec![
                 "camera".into(),
                 format!(
-                    "{} × {} px, f = {} mm",
-                    s.camera.width, s.camera.height, s.camera.focal_length_mm
+                    "{} × {} px, f = {} mm{}",
+                    s.camera.width,
+                    s.camera.height,
+                    s.camera.focal_length_mm,
+                    s.camera
+                        .aspect_ratio
+                        .map_or(String::new(), |a| format!(", fy/fx = {a}"))
                 ),
             ]);
         }

@@ -116,6 +116,19 @@ pub fn run_solved(
     dir: &std::path::Path,
     with_bound: bool,
 ) -> Result<(Outcome, Solved), String> {
+    let mut declared = scene.truth.clone();
+    declared.element.wedge = scene.declared;
+    run_solved_on(scene, &declared, dir, with_bound)
+}
+
+/// [`run_solved`] reconstructing on `declared` (the station file as given,
+/// where it differs from the truth by more than the wedge).
+pub fn run_solved_on(
+    scene: &Scene,
+    declared: &Station,
+    dir: &std::path::Path,
+    with_bound: bool,
+) -> Result<(Outcome, Solved), String> {
     let st = &scene.truth;
     let e = &st.element;
     let spec = RandomSurfaceSpec {
@@ -151,8 +164,6 @@ pub fn run_solved(
         &acq_dir,
     )
     .unwrap();
-    let mut declared = st.clone();
-    declared.element.wedge = scene.declared;
     let mut acq = Acquisition::open(&acq_dir).unwrap();
     let options = Options {
         surfaces: Some(SurfaceOptions::default()),
@@ -162,7 +173,7 @@ pub fn run_solved(
     };
     let rec = pipeline::reconstruct(
         Input::Acquisition(&mut acq),
-        &declared,
+        declared,
         &options,
         &mut |_, _| {},
     )
