@@ -148,6 +148,7 @@ fn camera(draw: &Draw, rng: &mut Xoshiro256PlusPlus) -> Cam {
         ],
         k: [draw.k[0], draw.k[1], 0.0],
         p: draw.p,
+        aspect: draw.aspect,
     }
 }
 
@@ -241,6 +242,9 @@ fn nominal(
         .map(|v| v + s * rng.random_range(-10.0..10.0));
     c.k = [0.0; 3];
     c.p = [0.0; 2];
+    // A camera that is not square is declared so, as square pixels: the
+    // lab knows to have it estimated, not its value.
+    c.aspect = cam.aspect.map(|_| 1.0);
     let mut sc = scr.clone();
     let q = sc.world(
         f64::from(sc.resolution[0]) / 2.0,

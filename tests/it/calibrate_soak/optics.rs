@@ -28,12 +28,16 @@ pub struct Cam {
     pub k: [f64; 3],
     /// See [`Cam::k`].
     pub p: [f64; 2],
+    /// `fy / fx` (`docs/proposals/aspect.md`); `None`: square pixels.
+    pub aspect: Option<f64>,
 }
 
 impl Cam {
-    /// `F = focal_length_mm / (pixel_pitch_um / 1000)`, px.
-    pub fn focal_px(&self) -> f64 {
-        self.focal_mm / (self.pitch_um / 1000.0)
+    /// `F = focal_length_mm / (pixel_pitch_um / 1000)`, px: `fx`, and
+    /// `fy = aspect · F` (`docs/proposals/aspect.md`).
+    pub fn focal_px(&self) -> [f64; 2] {
+        let f = self.focal_mm / (self.pitch_um / 1000.0);
+        [f, f * self.aspect.unwrap_or(1.0)]
     }
 
     /// The spec's distortion of normalised coordinates `(x', y')`.
@@ -73,10 +77,10 @@ impl Cam {
             return None;
         }
         let d = self.distort(q.x / q.z, q.y / q.z);
-        let f = self.focal_px();
+        let [fx, fy] = self.focal_px();
         Some(Point2::new(
-            self.principal_px[0] + f * d.x,
-            self.principal_px[1] + f * d.y,
+            self.principal_px[0] + fx * d.x,
+            self.principal_px[1] + fy * d.y,
         ))
     }
 
@@ -86,10 +90,10 @@ impl Cam {
     /// the sensor, so the root is unique there). `None` if it does not
     /// converge.
     pub fn undistort(&self, px: Point2<f64>) -> Option<Vector2<f64>> {
-        let f = self.focal_px();
+        let [fx, fy] = self.focal_px();
         let target = Vector2::new(
-            (px.x - self.principal_px[0]) / f,
-            (px.y - self.principal_px[1]) / f,
+            (px.x - self.principal_px[0]) / fx,
+            (px.y - self.principal_px[1]) / fy,
         );
         let mut x = target;
         for _ in 0..50 {

@@ -1,6 +1,7 @@
-//! The generator's stations as `mfd-station/2` text, written field by
-//! field from `interchange.md` (not through mfd's own writer), so that the
-//! truth reaches mfd through its reader as a lab's file would.
+//! The generator's stations as `mfd-station/2` text (`/3` with an aspect
+//! ratio, `docs/proposals/aspect.md`), written field by field from
+//! `interchange.md` (not through mfd's own writer), so that the truth
+//! reaches mfd through its reader as a lab's file would.
 
 use std::fmt::Write;
 
@@ -20,7 +21,8 @@ fn list(xs: &[f64]) -> String {
 
 /// The station file of a camera, screen and element.
 pub fn station_toml(cam: &Cam, scr: &Scr, elem: &Elem) -> String {
-    let mut s = String::from("format = \"mfd-station/2\"\n\n[camera]\n");
+    let version = if cam.aspect.is_some() { 3 } else { 2 };
+    let mut s = format!("format = \"mfd-station/{version}\"\n\n[camera]\n");
     let r = &cam.rotation;
     let rows: Vec<String> = (0..3)
         .map(|i| list(&[r[(i, 0)], r[(i, 1)], r[(i, 2)]]))
@@ -33,6 +35,9 @@ pub fn station_toml(cam: &Cam, scr: &Scr, elem: &Elem) -> String {
     let _ = writeln!(s, "pixel_pitch_um = {}", f(cam.pitch_um));
     let _ = writeln!(s, "resolution = [{w}, {h}]");
     let _ = writeln!(s, "principal_point_px = {}", list(&cam.principal_px));
+    if let Some(a) = cam.aspect {
+        let _ = writeln!(s, "aspect_ratio = {}", f(a));
+    }
     if cam.k.iter().chain(&cam.p).any(|&v| v != 0.0) {
         s += "\n[camera.distortion]\nmodel = \"brown-conrady\"\n";
         let _ = writeln!(s, "k = {}", list(&cam.k));
