@@ -16,8 +16,12 @@
 //!    `(i, j)` spans `[i, i+1) × [j, j+1)`, its centre at `(i + 0.5, j + 0.5)`).
 //! 5. Covariance: first order in the pixel noise, `C = σ² Σ d dᵀ / F²` over
 //!    the window (`d` the pixel's offset from the centre, `F` the flux).
-//!    The spot's own shot noise is not in it (the camera's gain is not in
-//!    the session); on a bright spot the stated σ is then a lower bound.
+//! 6. Then the maximum-likelihood fit of a pixel-integrated Gaussian over
+//!    the same window ([`super::centroid_fit`]), at the Cramér–Rao bound
+//!    (the moments leave 3.7× it on a Gaussian spot), with its covariance
+//!    widened by the fit's reduced χ² where the read noise does not explain
+//!    the residuals (shot noise, a spot's shape); a saturated spot, or one
+//!    the fit does not converge on, keeps the moments.
 //!
 //! Hand-written: no crate in the tree finds spots; the steps are a few
 //! dozen lines each and are tested on rendered spots against their truth.
@@ -26,6 +30,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix2, Point2};
 
+use super::centroid_fit::{fit_spot, Window};
 use super::spot_background::{noise_std, Background};
 
 use crate::formats::image_io::{self, GrayImage, ImageError};
@@ -318,6 +323,7 @@ impl Context<'_> {
         }
         let mut sigma = [region_sigma(spot, w, c); 2];
         let mut m = Moments::default();
+        let (mut origin, mut size) = ([0, 0], 0);
         for _ in 0..4 {
             let half = (4.0 * sigma[0].max(sigma[1]) + 1.0).ceil() as usize;
             let (ci, cj) = (c[0].floor() as usize, c[1].floor() as usize);
@@ -325,21 +331,32 @@ impl Context<'_> {
             if room < half {
                 return Err(self.edge_error(c, room as u32, half as u32));
             }
-            m = Moments::of(
-                residual,
-                values,
-                w,
-                [ci - half, cj - half],
-                2 * half + 1,
-                full,
-            );
+            (origin, size) = ([ci - half, cj - half], 2 * half + 1);
+            m = Moments::of(residual, values, w, origin, size, full);
             c = m.centre;
             sigma = m.sigma;
         }
         let var = noise * noise / (m.flux * m.flux);
+        let mut covariance = Matrix2::new(m.sxx, m.sxy, m.sxy, m.syy) * var;
+        // The fit where it holds (a saturated spot's flat top is no
+        // Gaussian: its moments stay).
+        let window = Window {
+            residual,
+            width: w,
+            origin,
+            size,
+            noise,
+        };
+        if m.saturated == 0 {
+            if let Some(f) = fit_spot(&window, c, sigma, m.flux) {
+                c = f.centre;
+                covariance = f.covariance;
+                sigma = f.sigma;
+            }
+        }
         Ok(Centroid {
             position_px: Point2::new(c[0], c[1]),
-            covariance_px2: Matrix2::new(m.sxx, m.sxy, m.sxy, m.syy) * var,
+            covariance_px2: covariance,
             flux_counts: m.flux,
             peak_counts: m.peak,
             background_counts: background.at(c[0] as usize, c[1] as usize),

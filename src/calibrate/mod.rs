@@ -33,6 +33,7 @@
 pub mod adjust;
 pub mod calibration;
 pub mod centroid;
+pub mod centroid_fit;
 pub mod check;
 mod check_layout;
 mod check_marks;
