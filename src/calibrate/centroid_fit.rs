@@ -12,9 +12,11 @@
 //! unbiased (the model's odd part, the centre, is orthogonal to its even
 //! part, the shape).
 //!
-//! Its covariance is `σ_n² (JᵀJ)⁻¹` at the fit, scaled by the reduced χ²
-//! where that exceeds 1 (the spot's own shot noise, a shape that is not a
-//! Gaussian: what the white read noise does not explain widens the σ).
+//! Its covariance is `σ_n² (JᵀJ)⁻¹` at the fit, scaled by the residuals'
+//! pixel-scale variance over σ_n² where that exceeds 1 (the spot's own shot
+//! noise). A spot whose residuals lie far above the noise is not a
+//! Gaussian: its fit is refused and the caller keeps the model-free
+//! moments.
 //!
 //! Hand-written: the model and its Jacobian are a few lines over `libm`'s
 //! erf; the loop is the crate's own.
@@ -38,6 +40,12 @@ const DAMPING: Damping = Damping {
 
 /// Trial steps; the fit converges in 3–6 from the moment start.
 const MAX_TRIALS: usize = 60;
+
+/// The largest pixel-scale residual variance over the read noise's at
+/// which the fit stands: a Gaussian spot's shot noise at one count per
+/// electron and a 1500-count peak over 25 counts of read noise gives 1.2
+/// over the window; a uniform disk's edges against the Gaussian give 36.
+const MAX_NOISE_RATIO: f64 = 3.0;
 
 /// A fitted spot.
 #[derive(Debug, Clone, PartialEq)]
@@ -179,6 +187,45 @@ impl LeastSquares for Window<'_> {
     }
 }
 
+impl Window<'_> {
+    /// The residuals' variance from neighbours' differences over the
+    /// read noise's: `Σ (r_k − r_k')² / 2` over horizontal and vertical
+    /// pairs, per pair. Noise is white at the pixel scale, the spot's own
+    /// shot noise included, and a pair's difference carries twice its
+    /// variance; a spot shape the Gaussian does not have leaves residuals
+    /// smooth at that scale, which the differences cancel. So it is the
+    /// noise the centre sees, not the misfit, which (even about the centre)
+    /// does not move it.
+    fn local_noise_ratio(&self, p: &Params) -> f64 {
+        let [cx, cy, flux, sx, sy, offset] = *p;
+        let n = self.size;
+        let gx: Vec<f64> = (0..n)
+            .map(|a| share(self.origin[0] + a, cx, sx)[0])
+            .collect();
+        let gy: Vec<f64> = (0..n)
+            .map(|b| share(self.origin[1] + b, cy, sy)[0])
+            .collect();
+        let r = |a: usize, b: usize| {
+            let k = (self.origin[1] + b) * self.width + self.origin[0] + a;
+            self.residual[k] - offset - flux * gx[a] * gy[b]
+        };
+        let (mut ss, mut pairs) = (0.0, 0usize);
+        for b in 0..n {
+            for a in 0..n {
+                if a + 1 < n {
+                    ss += (r(a + 1, b) - r(a, b)).powi(2);
+                    pairs += 1;
+                }
+                if b + 1 < n {
+                    ss += (r(a, b + 1) - r(a, b)).powi(2);
+                    pairs += 1;
+                }
+            }
+        }
+        ss / (2.0 * pairs.max(1) as f64) / (self.noise * self.noise)
+    }
+}
+
 /// The fit from the moment centroid's `centre`, `sigma` (px) and `flux`
 /// (counts); `None` where it does not converge or leaves the window, so
 /// the caller keeps the moments.
@@ -193,7 +240,14 @@ pub fn fit_spot(window: &Window, centre: [f64; 2], sigma: [f64; 2], flux: f64) -
     let inv = out.normal.jtj.clone().try_inverse()?;
     let dof = (window.size * window.size).saturating_sub(6).max(1) as f64;
     let chi2_per_dof = out.normal.cost / dof;
-    let scale = chi2_per_dof.max(1.0);
+    // A spot the Gaussian does not describe (a defocused disk, a ring)
+    // leaves residuals far above the noise: its covariance would be the
+    // model's, not the spot's, so it keeps the moments (model-free).
+    let scale = window.local_noise_ratio(&p);
+    if scale > MAX_NOISE_RATIO {
+        return None;
+    }
+    let scale = scale.max(1.0);
     let covariance = Matrix2::new(inv[(0, 0)], inv[(0, 1)], inv[(1, 0)], inv[(1, 1)]) * scale;
     (covariance[(0, 0)] > 0.0 && covariance[(1, 1)] > 0.0).then_some(SpotFit {
         centre: [p[0], p[1]],
