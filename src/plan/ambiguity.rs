@@ -12,7 +12,7 @@ use crate::acquire::patterns::FringeAxis;
 use crate::optics::station::Station;
 use crate::optics::trace::{Plate, TracedView, DEFAULT_EDGE_MARGIN_MM};
 use crate::optics::zernike::{ZernikeBasis, ZernikeSurface};
-use crate::solve::spectral::model::Design;
+use crate::solve::spectral::model::{Design, Repeats};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 
 use super::{PlanError, PlanOptions};
@@ -227,6 +227,10 @@ pub fn start_found_fraction(
     // A blur on the screen period: each falloff group's physical κ.
     let falloff = design.physical_falloff(kappa);
     let mut found = 0usize;
+    // A frame's value depends on its direction, τ and phase alone: one
+    // evaluation per distinct frame, copied to its repeats (the same bits).
+    let repeats = Repeats::new(design);
+    let mut distinct = vec![0.0; repeats.len()];
     let mut y = vec![0.0; design.frames.len()];
     for &q in pixels {
         let px = &view.pixels[q];
@@ -234,7 +238,8 @@ pub fn start_found_fraction(
             .into_iter()
             .filter_map(|h| h.ok().filter(|h| h.weight > 0.0))
             .collect();
-        for (f, yf) in design.frames.iter().zip(y.iter_mut()) {
+        for (&i, yf) in repeats.first.iter().zip(distinct.iter_mut()) {
+            let f = &design.frames[i as usize];
             let ax = design.axes[f.dir];
             let e = (-design.kappa_of(f, &falloff) * f.tau * f.tau).exp();
             *yf = 1.0
@@ -247,6 +252,9 @@ pub fn start_found_fraction(
                                 .cos()
                     })
                     .sum::<f64>();
+        }
+        for (yf, &g) in y.iter_mut().zip(&repeats.of_frame) {
+            *yf = distinct[g as usize];
         }
         let ok = (0..design.axes.len()).all(|d| {
             let ax = design.axes[d];

@@ -50,7 +50,7 @@ use crate::optics::station::Station;
 use crate::optics::trace::{PixelPaths, TracedView};
 use crate::solve::direct::pixel::{linearise, moved, start};
 use crate::solve::direct::DirectOptions;
-use crate::solve::spectral::model::{Design, Samples, SeriesSamples, MAX_PARAMS};
+use crate::solve::spectral::model::{Design, RepeatSamples, Repeats, Samples, MAX_PARAMS};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 
 /// Grid of starts scanned per direction, between 0 and twice the prior's
@@ -125,12 +125,13 @@ pub fn pixels_converge(
     tol_px: f64,
 ) -> f64 {
     let plans = SpectrumPlans::new(design);
+    let repeats = Repeats::new(design);
     let mut ok = 0usize;
     let mut n = 0usize;
     for &q in pixels {
         let Some(hit) = pixel_converges(
             design,
-            &plans,
+            (&plans, &repeats),
             (&prior.pixels[q], &truth.pixels[q]),
             gain,
             radiometry,
@@ -151,7 +152,7 @@ pub fn pixels_converge(
 
 fn pixel_converges(
     design: &Design,
-    plans: &SpectrumPlans,
+    (plans, repeats): (&SpectrumPlans, &Repeats),
     (prior, truth): (&PixelPaths, &PixelPaths),
     gain: f64,
     radiometry: &crate::budget::scene::Radiometry,
@@ -163,13 +164,27 @@ fn pixel_converges(
     if t.k != s.k || t.k == 0 {
         return None;
     }
+    // The noise-free series: one model value per distinct frame, summed
+    // over its repeats (the series' least squares; see `RepeatSamples`).
     let mut row = [0.0; MAX_PARAMS];
-    let y: Vec<f64> = design
-        .frames
+    let means: Vec<f64> = repeats
+        .first
         .iter()
-        .map(|f| crate::solve::spectral::model::eval_row(design, f, &t, &mut row))
+        .map(|&f| {
+            crate::solve::spectral::model::eval_row(
+                design,
+                &design.frames[f as usize],
+                &t,
+                &mut row,
+            )
+        })
         .collect();
-    let samples = SeriesSamples::new(design, plans, &y, t.kappa);
+    let y: Vec<f64> = repeats
+        .of_frame
+        .iter()
+        .map(|&g| means[g as usize])
+        .collect();
+    let samples = RepeatSamples::new(design, plans, repeats, &y, t.kappa);
     let k = t.k;
     let mut s0 = [f64::NAN; 4];
     for j in 0..k {

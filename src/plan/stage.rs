@@ -18,13 +18,17 @@
 //! stage (it forbade designs the stage measures) or looser (a 200-frame
 //! design it passed measured nothing, the detection failing in noise).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::optics::trace::{PixelPaths, TracedView};
-use crate::solve::spectral::model::{Design, Params, SeriesSamples, MAX_PARAMS, MAX_REFLECTIONS};
+use crate::solve::spectral::model::{
+    Design, Falloff, Params, RepeatSamples, Repeats, Samples, MAX_PARAMS, MAX_REFLECTIONS,
+};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 use crate::solve::spectral::pixel::{fit_samples_seeded, PixelContext, PixelFits};
 use crate::solve::spectral::statistics::{Statistics, STATS_BLOCK};
@@ -162,11 +166,15 @@ fn band(
     (centres, band)
 }
 
-/// One pixel's noisy series under `design`: the truth's reflections
-/// `truth` with the radiometry of `opts` (counts, rounded, within the
-/// camera's range as the simulator writes them).
+/// One pixel's noisy series under `design` (whose distinct frames are
+/// `repeats`): the truth's reflections `truth` with the radiometry of
+/// `opts` (counts, rounded, within the camera's range as the simulator
+/// writes them), one draw per frame. The model's value is a function of
+/// the frame's direction, τ and phase alone, so it is evaluated once per
+/// distinct frame (the same bits).
 fn series(
     design: &Design,
+    repeats: &Repeats,
     truth: &PixelPaths,
     gain: f64,
     opts: &PlanOptions,
@@ -177,11 +185,23 @@ fn series(
     let full = f64::from((1u32 << r.bit_depth.min(16)) - 1);
     let sigma = r.sigma_counts();
     let mut row = [0.0; MAX_PARAMS];
-    design
-        .frames
+    let means: Vec<f64> = repeats
+        .first
         .iter()
-        .map(|f| {
-            let mean = crate::solve::spectral::model::eval_row(design, f, &p, &mut row);
+        .map(|&f| {
+            crate::solve::spectral::model::eval_row(
+                design,
+                &design.frames[f as usize],
+                &p,
+                &mut row,
+            )
+        })
+        .collect();
+    repeats
+        .of_frame
+        .iter()
+        .map(|&g| {
+            let mean = means[g as usize];
             let z: f64 = StandardNormal.sample(rng);
             (mean + sigma * z).round().clamp(0.0, full) as u16
         })
@@ -208,6 +228,102 @@ fn found(fits: &PixelFits, truth: &PixelPaths, two: bool) -> bool {
     })
 }
 
+/// The statistics engine's sums of the series `ys` (one per pixel of
+/// `pixels`, in order) over its band around `prior`'s prediction, sealed;
+/// `None` where the band cannot be held.
+fn statistics_of(
+    design: &Design,
+    prior: &TracedView,
+    pixels: &[usize],
+    config: &SpectralConfig,
+    plans: &SpectrumPlans,
+    kappa0: f64,
+    ys: &[Vec<u16>],
+) -> Option<Statistics> {
+    let (centres, band) = band(design, prior, pixels, config, plans);
+    let mut s = Statistics::new(
+        design,
+        &centres,
+        &band,
+        [-kappa0, 16.0 * kappa0],
+        config.saturation_counts,
+    )
+    .ok()?;
+    let n = design.frames.len();
+    let mut first = 0;
+    while first < n {
+        let rows = STATS_BLOCK.min(n - first);
+        let mut block = Vec::with_capacity(rows * ys.len());
+        for r in 0..rows {
+            block.extend(ys.iter().map(|y| y[first + r]));
+        }
+        s.ingest(first, rows, &block);
+        first += rows;
+    }
+    s.seal();
+    Some(s)
+}
+
+/// What every sample pixel's fit shares: the schedule, its periodogram
+/// plans and distinct frames, the views, and the stage's settings.
+struct Judge<'a> {
+    design: &'a Design,
+    plans: SpectrumPlans,
+    repeats: Repeats,
+    prior: &'a TracedView,
+    truth: &'a TracedView,
+    /// Whether the scene has two reflections (the model judged).
+    two: bool,
+    /// Samples at 0 or at/above this are excluded (clipped).
+    sat: u16,
+    falloff0: Falloff,
+    max_iter: usize,
+}
+
+impl Judge<'_> {
+    /// Pixel `q`'s fit on `data` (`excluded` samples clipped): (found,
+    /// no signal), as counts.
+    fn fit<S: Samples>(&self, q: usize, data: &S, excluded: usize) -> (usize, usize) {
+        let ctx = PixelContext {
+            design: self.design,
+            plans: &self.plans,
+            prior: &self.prior.pixels[q],
+            borrowed_offset: None,
+            kappa0: self.falloff0,
+            allow_third: false,
+            max_iter: self.max_iter,
+        };
+        let mut fits = PixelFits::none();
+        fit_samples_seeded(&ctx, data, excluded, None, &mut fits);
+        (
+            usize::from(found(&fits, &self.truth.pixels[q], self.two)),
+            usize::from(
+                fits.base
+                    .flags
+                    .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
+            ),
+        )
+    }
+
+    /// Pixel `q`'s fit on its series `raw`, summed over the repeated
+    /// frames (the same least squares at a cost in distinct frames).
+    fn fit_series(&self, q: usize, raw: &[u16]) -> (usize, usize) {
+        let y: Vec<f64> = raw
+            .iter()
+            .map(|&v| {
+                if v == 0 || v >= self.sat {
+                    f64::NAN
+                } else {
+                    f64::from(v)
+                }
+            })
+            .collect();
+        let excluded = y.iter().filter(|v| v.is_nan()).count();
+        let data = RepeatSamples::new(self.design, &self.plans, &self.repeats, &y, self.falloff0);
+        self.fit(q, &data, excluded)
+    }
+}
+
 /// Runs the stage on `pixels` of `prior` (the station's flat-plate
 /// prediction, as the stage holds it) with their true points from `truth`
 /// (the expected surfaces), one noise draw each from `seed`.
@@ -221,98 +337,75 @@ pub fn stage_check(
     seed: u64,
 ) -> StageCheck {
     let config = &opts.spectral;
-    let plans = SpectrumPlans::new(design);
     let kappa0 = config
         .tau_max_guess
         .unwrap_or_else(|| design.frames.iter().map(|f| f.tau).fold(0.0, f64::max))
         .powi(-2);
-    let two = truth
-        .pixels
-        .iter()
-        .any(|p| p.back.is_ok_and(|h| h.weight > 0.0));
-    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
-    let ys: Vec<Vec<u16>> = pixels
-        .iter()
-        .map(|&q| series(design, &truth.pixels[q], gain, opts, &mut rng))
-        .collect();
-    let statistics = uses_statistics(prior, design.frames.len(), config);
-    let stats = statistics
-        .then(|| {
-            let (centres, band) = band(design, prior, pixels, config, &plans);
-            let mut s = Statistics::new(
-                design,
-                &centres,
-                &band,
-                [-kappa0, 16.0 * kappa0],
-                config.saturation_counts,
-            )
-            .ok()?;
-            let n = design.frames.len();
-            let mut first = 0;
-            while first < n {
-                let rows = STATS_BLOCK.min(n - first);
-                let mut block = Vec::with_capacity(rows * ys.len());
-                for r in 0..rows {
-                    block.extend(ys.iter().map(|y| y[first + r]));
-                }
-                s.ingest(first, rows, &block);
-                first += rows;
-            }
-            s.seal();
-            Some(s)
-        })
-        .flatten();
     let full = ((1u32 << opts.radiometry.bit_depth.min(16)) - 1) as u16;
-    let sat = config.saturation_counts.unwrap_or(full);
-    let falloff0 = design.uniform_falloff(kappa0);
-    // Each pixel's fit on its own series (drawn above, in order, from one
-    // generator): independent, so on every core; the counts are sums.
-    let (ok, silent) = pixels
-        .par_iter()
-        .enumerate()
-        .map(|(i, &q)| {
-            let ctx = PixelContext {
-                design,
-                plans: &plans,
-                prior: &prior.pixels[q],
-                borrowed_offset: None,
-                kappa0: falloff0,
-                allow_third: false,
-                max_iter: config.max_iter,
-            };
-            let mut fits = PixelFits::none();
-            if statistics {
-                match stats.as_ref().and_then(|s| s.samples(design, i, Some(sat))) {
-                    Some((data, excluded)) => {
-                        fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
-                    }
-                    None => return (0, 0),
+    let judge = Judge {
+        design,
+        plans: SpectrumPlans::new(design),
+        repeats: Repeats::new(design),
+        prior,
+        truth,
+        two: truth
+            .pixels
+            .iter()
+            .any(|p| p.back.is_ok_and(|h| h.weight > 0.0)),
+        sat: config.saturation_counts.unwrap_or(full),
+        falloff0: design.uniform_falloff(kappa0),
+        max_iter: config.max_iter,
+    };
+    // One generator, one pixel after another: every pixel's draws are
+    // those of this order, whatever runs when.
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut draw = |q: usize| {
+        series(
+            design,
+            &judge.repeats,
+            &truth.pixels[q],
+            gain,
+            opts,
+            &mut rng,
+        )
+    };
+    let statistics = uses_statistics(prior, design.frames.len(), config);
+    let (ok, silent) = if statistics {
+        let ys: Vec<Vec<u16>> = pixels.iter().map(|&q| draw(q)).collect();
+        let stats = statistics_of(design, prior, pixels, config, &judge.plans, kappa0, &ys);
+        // Each pixel's fit on its own statistics: independent, so on
+        // every core; the counts are sums.
+        pixels
+            .par_iter()
+            .enumerate()
+            .map(|(i, &q)| {
+                match stats
+                    .as_ref()
+                    .and_then(|s| s.samples(design, i, Some(judge.sat)))
+                {
+                    Some((data, excluded)) => judge.fit(q, &data, excluded),
+                    None => (0, 0),
                 }
-            } else {
-                let y: Vec<f64> = ys[i]
-                    .iter()
-                    .map(|&v| {
-                        if v == 0 || v >= sat {
-                            f64::NAN
-                        } else {
-                            f64::from(v)
-                        }
-                    })
-                    .collect();
-                let excluded = y.iter().filter(|v| v.is_nan()).count();
-                let data = SeriesSamples::new(design, &plans, &y, falloff0);
-                fit_samples_seeded(&ctx, &data, excluded, None, &mut fits);
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+    } else {
+        // Each pixel's series is fitted on the pool as soon as it is
+        // drawn, while the next is drawn: the draws stay in order, the
+        // fits are independent and the counts sums.
+        let (ok, silent) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        rayon::scope(|s| {
+            for &q in pixels {
+                let raw = draw(q);
+                let (ok, silent, judge) = (&ok, &silent, &judge);
+                s.spawn(move |_| {
+                    let (a, b) = judge.fit_series(q, &raw);
+                    ok.fetch_add(a, Ordering::Relaxed);
+                    silent.fetch_add(b, Ordering::Relaxed);
+                });
             }
-            (
-                usize::from(found(&fits, &truth.pixels[q], two)),
-                usize::from(
-                    fits.base
-                        .flags
-                        .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
-                ),
-            )
-        })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        });
+        (ok.into_inner(), silent.into_inner())
+    };
     let n = pixels.len().max(1) as f64;
     let found_fraction = ok as f64 / n;
     StageCheck {

@@ -58,6 +58,7 @@ mod measure_sim;
 mod outline;
 mod phase_shifting;
 mod plan_cli;
+mod plan_repeats;
 mod plan_schedules;
 mod plan_thin;
 mod reconstruct_cli;

@@ -5,8 +5,9 @@
 use serde::Serialize;
 
 use crate::optics::trace::TracedView;
-use crate::solve::spectral::bound::truth_cov_map;
+use crate::solve::spectral::bound::truth_cov_map_repeated;
 use crate::solve::spectral::model::Design;
+use crate::solve::spectral::model::Repeats;
 use crate::solve::spectral::pixel::RESOLVE_SIGMAS;
 
 use super::super::PlanOptions;
@@ -32,9 +33,11 @@ pub struct Separation {
     pub separable: bool,
 }
 
-/// The bound's covariance of one pixel (`screen_cov.npy` layout, 16 values).
+/// The bound's covariance of one pixel (`screen_cov.npy` layout, 16 values);
+/// `repeats` are `design`'s distinct frames ([`Repeats::new`]).
 pub fn pixel_cov(
     design: &Design,
+    repeats: &Repeats,
     view: &TracedView,
     q: usize,
     gain: f64,
@@ -46,8 +49,9 @@ pub fn pixel_cov(
         height: 1,
         pixels: vec![view.pixels[q]],
     };
-    truth_cov_map(
+    truth_cov_map_repeated(
         design,
+        repeats,
         &one,
         gain,
         r.ambient,
@@ -64,6 +68,7 @@ pub fn separation(
     gain: f64,
     opts: &PlanOptions,
 ) -> Separation {
+    let repeats = Repeats::new(design);
     let mut seps = Vec::new();
     let mut good = 0usize;
     for &q in both {
@@ -74,7 +79,7 @@ pub fn separation(
         let d = [b.u - f.u, b.v - f.v];
         let dist = d[0].hypot(d[1]);
         seps.push(dist);
-        let c = pixel_cov(design, view, q, gain, opts);
+        let c = pixel_cov(design, &repeats, view, q, gain, opts);
         // Var of the separation along d: Var(Δ) with Δ = (u2 − u1, v2 − v1).
         let at = |a: usize, b: usize| c[4 * a + b];
         let mut var = 0.0;

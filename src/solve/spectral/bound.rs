@@ -1,7 +1,7 @@
 //! The Cramér–Rao bound of the screen points under the joint model, and
 //! under the phase-shifting one-reflection model ([`phase_shifting_cov`]).
 
-use super::model::{normal_equations, Design, Params, MAX_REFLECTIONS};
+use super::model::{normal_equations, Design, Params, Repeats, MAX_REFLECTIONS};
 
 /// Standard deviations `sqrt(σ_u² + σ_v²)` of S1 and S2 that no unbiased
 /// estimator can beat, for two reflections at `uv` with background `offset`
@@ -35,14 +35,17 @@ pub fn two_reflection_cov(
     kappa: f64,
     sigma: f64,
 ) -> Option<[[f64; 4]; 4]> {
-    let rows = reflections_cov(design, &uv, offset, &amp, kappa, sigma)?;
+    let rows = reflections_cov(design, None, &uv, offset, &amp, kappa, sigma)?;
     Some(std::array::from_fn(|a| rows[a]))
 }
 
 /// The bound's covariance of the reflections present, `(u, v)` per
-/// reflection in `uv` order (1 or 2 reflections).
+/// reflection in `uv` order (1 or 2 reflections); the information summed
+/// over `repeats` when given (the same sum, bit for bit without repeats),
+/// else over every frame.
 fn reflections_cov(
     design: &Design,
+    repeats: Option<&Repeats>,
     uv: &[[f64; 2]],
     offset: f64,
     amp: &[f64],
@@ -59,12 +62,15 @@ fn reflections_cov(
     };
     p.amp[..k].copy_from_slice(amp);
     p.uv[..k].copy_from_slice(uv);
-    let index: Vec<u32> = (0..design.frames.len() as u32).collect();
-    let zeros = vec![0.0; index.len()];
-    let cov = normal_equations(design, &index, &zeros, &p)
-        .jtj
-        .try_inverse()?
-        * (sigma * sigma);
+    let information = match repeats {
+        Some(r) => r.information(design, &p),
+        None => {
+            let index: Vec<u32> = (0..design.frames.len() as u32).collect();
+            let zeros = vec![0.0; index.len()];
+            normal_equations(design, &index, &zeros, &p).jtj
+        }
+    };
+    let cov = information.try_inverse()? * (sigma * sigma);
     // Flattened 2k × 2k block of the screen coordinates, row by row.
     let idx: Vec<usize> = (0..k)
         .flat_map(|j| [p.u_index(j), p.u_index(j) + 1])
@@ -90,6 +96,31 @@ pub fn truth_cov_map(
     kappa: f64,
     sigma: f64,
 ) -> Vec<f64> {
+    truth_cov_map_in(design, None, view, [gain, ambient, kappa, sigma])
+}
+
+/// [`truth_cov_map`] with the information summed over `repeats`, the
+/// distinct frames of `design` with their counts
+/// ([`Repeats::information`]): the same sums in exact arithmetic (bit for
+/// bit without repeats), at a cost in distinct frames, not frames.
+pub fn truth_cov_map_repeated(
+    design: &Design,
+    repeats: &Repeats,
+    view: &crate::optics::trace::TracedView,
+    gain: f64,
+    ambient: f64,
+    kappa: f64,
+    sigma: f64,
+) -> Vec<f64> {
+    truth_cov_map_in(design, Some(repeats), view, [gain, ambient, kappa, sigma])
+}
+
+fn truth_cov_map_in(
+    design: &Design,
+    repeats: Option<&Repeats>,
+    view: &crate::optics::trace::TracedView,
+    [gain, ambient, kappa, sigma]: [f64; 4],
+) -> Vec<f64> {
     let mut out = vec![f64::NAN; view.pixels.len() * 16];
     for (q, px) in view.pixels.iter().enumerate() {
         let present: Vec<(usize, crate::optics::trace::ScreenHit)> = [px.front, px.back]
@@ -103,7 +134,7 @@ pub fn truth_cov_map(
         let uv: Vec<[f64; 2]> = present.iter().map(|(_, h)| [h.u, h.v]).collect();
         let amp: Vec<f64> = present.iter().map(|(_, h)| 0.5 * gain * h.weight).collect();
         let offset = gain * (ambient + 0.5 * present.iter().map(|(_, h)| h.weight).sum::<f64>());
-        let Some(c) = reflections_cov(design, &uv, offset, &amp, kappa, sigma) else {
+        let Some(c) = reflections_cov(design, repeats, &uv, offset, &amp, kappa, sigma) else {
             continue;
         };
         let slots: Vec<usize> = present

@@ -29,11 +29,13 @@ use crate::kernels::sincos_cycles;
 pub mod censored;
 mod design;
 pub mod fit;
+mod repeats;
 mod samples;
 
 pub use design::{Axis, Design, Falloff, FrameMeta};
 pub(crate) use fit::ParamCholesky;
 pub use fit::{gauss_newton_step, levenberg_marquardt, Fit, DAMPING};
+pub use repeats::{RepeatSamples, Repeats};
 pub use samples::{envelope, linear_amplitudes, linear_amplitudes_in, Samples, SeriesSamples};
 
 /// Largest number of reflections modelled.
