@@ -75,6 +75,7 @@ pub fn surfaces_from_frames(
                 two_reflection_pixels: d.two_reflection_pixels,
                 clipped: d.clipped,
                 third_reflection: d.third_reflection,
+                starts: d.starts,
                 seconds: d.seconds,
                 width: station.camera.width as usize,
                 predicted: d.predicted,
@@ -117,9 +118,16 @@ pub fn withheld(
         let why = format!(
             "the surface-domain fit did not converge in {} iterations (its last step moved a \
              coefficient by {step:.2} of its σ): the two reflections are too close for this \
-             schedule to separate; a schedule designed for this plate (mfd plan) would",
+             schedule to separate. `mfd plan` on this station predicts whether the fit \
+             converges on a schedule before it is measured (on sample pixels, so a schedule it \
+             designed can still fall short), and where it does not, names what to add: frames \
+             at low τ, or a closer prior",
             d.iterations.len()
         );
+        let back = summary.back.is_some().then(|| why.clone());
+        return [Some(why), back];
+    }
+    if let Some(why) = direct.and_then(|d| d.starts.as_ref()?.withheld_because()) {
         let back = summary.back.is_some().then(|| why.clone());
         return [Some(why), back];
     }
@@ -136,8 +144,9 @@ pub fn withheld(
         );
         if let Some(limit) = limit_nm.filter(|&l| expected > l) {
             return Some(format!(
-                "{what} above the limit of {limit:.1} nm asked for; a longer schedule or one \
-                 designed for this plate (mfd plan) would measure it"
+                "{what} above the limit of {limit:.1} nm asked for; `mfd plan --target-nm \
+                 {limit:.1}` designs a schedule predicted to reach it, or says that none up to \
+                 its frame limit does"
             ));
         }
         // With no term beyond tilt (the criterion chose a plane) there is
@@ -146,9 +155,11 @@ pub fn withheld(
             format!(
                 "{what} as large as the fitted surface itself ({:.1} nm RMS): this acquisition \
                  does not resolve it (the two reflections too close for the schedule's τ \
-                 range, or too little signal); a schedule designed for this plate (mfd plan) \
-                 or more frames would",
-                figures.rms_nm
+                 range, or too little signal); `mfd plan --target-nm {:.1}` designs a schedule \
+                 whose predicted error is below the surface's size, or says that none up to \
+                 its frame limit reaches it",
+                figures.rms_nm,
+                figures.rms_nm / 2.0
             )
         })
     };

@@ -129,6 +129,10 @@ pub struct DirectSummary {
     /// bare glass), with its σ; absent where it was not modelled.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub third_reflection: Option<crate::solve::direct::ThirdReflection>,
+    /// The fit run again from the plate as made, where it started from the
+    /// per-pixel surfaces: the two answers compared, the one kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub starts: Option<crate::solve::direct::Starts>,
     /// Wall time, s.
     pub seconds: f64,
     /// Per outer iteration: objective, terms, step fraction, step in σ.
@@ -321,6 +325,7 @@ impl Summary {
             two_reflection_pixels: d.two_reflection_pixels,
             clipped: d.clipped,
             third_reflection: d.third_reflection,
+            starts: d.starts.clone(),
             seconds: d.seconds,
             iterations: d.iterations.clone(),
             per_pixel_failed: d.per_pixel_failed.clone(),

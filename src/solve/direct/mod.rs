@@ -33,7 +33,7 @@ mod separation;
 
 pub use report::DirectReport;
 pub use run::{
-    solve, Clipped, DirectError, DirectOptions, DirectSolution, Iteration, ThirdReflection,
+    solve, Clipped, DirectError, DirectOptions, DirectSolution, Iteration, Starts, ThirdReflection,
 };
 pub use separation::{
     median_separation_bins, median_separation_bins_of, surface_domain_preferred, DIRECT_BELOW_BINS,

@@ -1,7 +1,7 @@
 //! The surface-domain fit's account of itself, for `summary.json` and the
 //! maps: what `pipeline` reports of a fit and `report` reads.
 
-use super::{Clipped, Iteration, ThirdReflection};
+use super::{Clipped, Iteration, Starts, ThirdReflection};
 
 /// What the surface-domain fit did, for `summary.json` and the maps.
 #[derive(Debug, Clone)]
@@ -16,6 +16,8 @@ pub struct DirectReport {
     pub clipped: Clipped,
     /// The third reflection's factor and σ, where the frames showed it.
     pub third_reflection: Option<ThirdReflection>,
+    /// The second start's comparison, where there was one.
+    pub starts: Option<Starts>,
     /// Wall time, s.
     pub seconds: f64,
     /// Camera width, pixels (the maps' row length).

@@ -7,6 +7,7 @@
 
 mod iterate;
 mod pixels;
+mod starts;
 mod step;
 mod third;
 
@@ -17,6 +18,7 @@ use crate::solve::spectral::{PixelFlags, SpectralMaps, SpectralSolver};
 use crate::solve::surfaces::{Observations, SurfaceError, SurfaceOptions, SurfaceSolution};
 use iterate::fit;
 use pixels::{maps_of, Pix};
+pub use starts::{Starts, CLEAR_PREFERENCE, SAME_POINT_SIGMA};
 
 /// How hard the outer iteration tries.
 #[derive(Debug, Clone, PartialEq)]
@@ -130,6 +132,9 @@ pub struct DirectSolution {
     /// The third reflection's factor, where the data showed it (else the
     /// model has two reflections).
     pub third_reflection: Option<ThirdReflection>,
+    /// The second start's comparison, where the fit started from the
+    /// per-pixel surfaces ([`Starts`]).
+    pub starts: Option<Starts>,
     /// Wall time, s.
     pub seconds: f64,
 }
@@ -172,7 +177,7 @@ pub fn solve(
     // pixel flagged unresolved: a thin plate), the global fit decides.
     let resolved_one = maps.scene_model < 2 && unresolved_share(maps) < 0.5;
     if !resolved_one {
-        let two = fit(solver, maps, station, start_from, surface, opts, true)?;
+        let two = fit_from_starts(solver, maps, station, start_from, surface, opts, true)?;
         let test = two.back_amplitude_test();
         if !test.absent() {
             return Ok(two.finish(station, t0));
@@ -185,7 +190,41 @@ pub fn solve(
             test.expected
         );
     }
-    Ok(fit(solver, maps, station, start_from, surface, opts, false)?.finish(station, t0))
+    Ok(
+        fit_from_starts(solver, maps, station, start_from, surface, opts, false)?
+            .finish(station, t0),
+    )
+}
+
+/// The outer iteration from `start_from` and, where that is the per-pixel
+/// surfaces, again from the plate as made, one answer kept
+/// ([`starts::choose`]). A second run that fails leaves the first.
+fn fit_from_starts(
+    solver: &SpectralSolver,
+    maps: &SpectralMaps,
+    station: &Station,
+    start_from: Option<&SurfaceSolution>,
+    surface: &SurfaceOptions,
+    opts: &DirectOptions,
+    two: bool,
+) -> Result<Fitted, DirectError> {
+    let a = fit(solver, maps, station, start_from, surface, opts, two)?;
+    if start_from.is_none() {
+        return Ok(a);
+    }
+    match fit(solver, maps, station, None, surface, opts, two) {
+        Ok(b) => {
+            let (mut kept, starts) = starts::choose(a, b);
+            kept.starts = Some(starts);
+            Ok(kept)
+        }
+        Err(e) => {
+            log::info!(
+                "surface-domain fit from the plate as made: {e}; the per-pixel start's kept"
+            );
+            Ok(a)
+        }
+    }
 }
 
 /// The state of a fit: pixels, plate, solution and iterations.
@@ -196,6 +235,7 @@ struct Fitted {
     iterations: Vec<Iteration>,
     converged: bool,
     third: Option<ThirdReflection>,
+    starts: Option<Starts>,
 }
 
 impl Fitted {
@@ -235,6 +275,7 @@ impl Fitted {
             chi2_map,
             iterations: self.iterations,
             converged: self.converged,
+            starts: self.starts,
             seconds: t0.elapsed().as_secs_f64(),
         }
     }

@@ -9,8 +9,9 @@
 //! [`OVERALL`]; a refusal must say why. The disk soak is the wedge soak.
 //!
 //! `MFD_OUTLINE_SOAK_DRAWS=n` (default 16, ~1 minute on 2 cores in the
-//! test profile), `MFD_OUTLINE_SOAK_SEED=s`; failing seeds are appended to
-//! `target/outline-soak-failures.txt`.
+//! test profile), `MFD_OUTLINE_SOAK_SEED=s` (with `MFD_SOAK_NOISE_STUDY=k`:
+//! that draw under `k` noise realisations, not judged); failing seeds are
+//! appended to `target/outline-soak-failures.txt`.
 
 use std::path::{Path, PathBuf};
 
@@ -21,7 +22,7 @@ use mfd::sim::Falloff;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use crate::wedge::chain::{binned_paper_station, run_scored, Scene};
+use crate::wedge::chain::{binned_paper_station, noise_study, run_scored, Scene};
 use crate::wedge::soak::{env_u64, save_failure_to};
 
 /// As the wedge soak's: the RMS of ~33 unit z-scores within 0.6–1.4 at
@@ -33,14 +34,12 @@ const OVERALL: std::ops::RangeInclusive<f64> = 0.6..=1.6;
 
 const FIRST_SEED: u64 = 40_000;
 
-/// Seeds that fail for a reason found and not yet fixed: printed and saved
-/// like any failure, not asserted.
-/// - 40011: a 49.9 × 17.5 mm rectangle, 8.1 mm, n 1.49, 400 frames: the
-///   surface-domain fit converges (or stops at its 12 iterations, withheld,
-///   as the last bits of its sums fall) and its back is 2.07× its reported
-///   error: issue 36's open case (seed 36071), the surface-domain fit's
-///   covariance on a schedule not designed for the plate.
-const KNOWN: &[u64] = &[40_011];
+// Seed 40011 (a 59.9 × 25.1 mm rectangle, 8.1 mm, n 1.49) was a confident
+// wrong answer: the surface-domain fit from the per-pixel surfaces chose 36
+// terms and a maximum less likely than the plate as made's (its back 2.07×
+// its report; on other noise draws up to 8×). The fit now keeps the more
+// likely of the two starts (`solve::direct::Starts`); the seed is among the
+// default draws and asserted.
 
 /// One draw.
 #[derive(Debug, Clone)]
@@ -148,6 +147,10 @@ fn random_outlines_are_measured_honestly_or_refused_in_words() {
             surface_rms_nm: draw.surface_rms_nm,
             falloff: Falloff::Tau,
         };
+        if let Some(k) = env_u64("MFD_SOAK_NOISE_STUDY") {
+            noise_study(&scene, k);
+            return;
+        }
         let dir = tempfile::tempdir().unwrap();
         match std::panic::catch_unwind(|| run_scored(&scene, dir.path(), false)) {
             Err(_) => {
@@ -189,12 +192,7 @@ fn random_outlines_are_measured_honestly_or_refused_in_words() {
         seeds.len(),
         ratios.len()
     );
-    let new: Vec<u64> = failed
-        .iter()
-        .copied()
-        .filter(|s| !KNOWN.contains(s))
-        .collect();
-    assert!(new.is_empty(), "failing seeds: {new:?} (known: {KNOWN:?})");
+    assert!(failed.is_empty(), "failing seeds: {failed:?}");
     if seeds.len() > 1 {
         // A soak that judges nothing tests nothing: at least a third of the
         // 2 × draws surfaces must be reported (the rest withheld in words,

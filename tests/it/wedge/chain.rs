@@ -116,9 +116,14 @@ pub fn run_solved(
     dir: &std::path::Path,
     with_bound: bool,
 ) -> Result<(Outcome, Solved), String> {
+    run_solved_on(scene, &declared_of(scene), dir, with_bound)
+}
+
+/// The station file the scene declares: the truth with its declared wedge.
+fn declared_of(scene: &Scene) -> Station {
     let mut declared = scene.truth.clone();
     declared.element.wedge = scene.declared;
-    run_solved_on(scene, &declared, dir, with_bound)
+    declared
 }
 
 /// [`run_solved`] reconstructing on `declared` (the station file as given,
@@ -128,6 +133,30 @@ pub fn run_solved_on(
     declared: &Station,
     dir: &std::path::Path,
     with_bound: bool,
+) -> Result<(Outcome, Solved), String> {
+    run_solved_full(scene, declared, dir, with_bound, scene.seed + 1000)
+}
+
+/// [`run_solved`] with the noise drawn from `noise_seed` (the surfaces
+/// still from the scene's seed): the same element and station under
+/// another noise realisation.
+pub fn run_solved_with_noise(
+    scene: &Scene,
+    dir: &std::path::Path,
+    with_bound: bool,
+    noise_seed: u64,
+) -> Result<(Outcome, Solved), String> {
+    run_solved_full(scene, &declared_of(scene), dir, with_bound, noise_seed)
+}
+
+/// Renders the scene with the noise of `noise_seed` and reconstructs it
+/// on `declared`.
+fn run_solved_full(
+    scene: &Scene,
+    declared: &Station,
+    dir: &std::path::Path,
+    with_bound: bool,
+    noise_seed: u64,
 ) -> Result<(Outcome, Solved), String> {
     let st = &scene.truth;
     let e = &st.element;
@@ -143,7 +172,7 @@ pub fn run_solved_on(
     let params = SimParams {
         noise_frac: scene.noise,
         bit_depth: 12,
-        seed: scene.seed + 1000,
+        seed: noise_seed,
         falloff: scene.falloff,
         ..SimParams::default()
     };
@@ -351,5 +380,99 @@ fn an_undeclared_thirty_arcmin_wedge_is_found_and_measured_or_named() {
                 "{msg}"
             );
         }
+    }
+}
+
+/// The same draw under `realisations` noise seeds (the soaks' knob for a
+/// seed whose error exceeds its report): per surface, the reported error,
+/// the mean fit's error (a bias shows here and does not shrink with more
+/// realisations) and the fits' scatter about their mean (what the reported
+/// error should match if the fit is unbiased), each over the outline.
+/// Printed, one line per realisation and one per surface.
+pub fn noise_study(scene: &Scene, realisations: u64) {
+    let mut fits: [Vec<Vec<f64>>; 2] = [Vec::new(), Vec::new()];
+    let mut reported: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+    let mut stds: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+    let mut truth: Option<[ZernikeSurface; 2]> = None;
+    for r in 0..realisations {
+        let dir = tempfile::tempdir().unwrap();
+        match run_solved_with_noise(scene, dir.path(), false, scene.seed + 1000 + 7919 * r) {
+            Err(msg) => eprintln!("noise study {r}: refused: {msg}"),
+            Ok((o, s)) => {
+                eprintln!(
+                    "noise study {r}: error {:.2?} nm, reported {:.2?}, z_rms {:.2?}, withheld {:?}",
+                    o.error, o.reported, o.z_rms, o.withheld
+                );
+                for k in 0..2 {
+                    let surf = if k == 0 {
+                        &s.solution.front
+                    } else {
+                        &s.solution.back
+                    };
+                    let std = if k == 0 {
+                        &s.solution.front_std_nm
+                    } else {
+                        &s.solution.back_std_nm
+                    };
+                    stds[k] = std.clone();
+                    fits[k].push(surf.coefficients_nm().to_vec());
+                    reported[k].push(o.reported[k]);
+                }
+                truth = Some(s.truth);
+            }
+        }
+    }
+    let Some(truth) = truth else { return };
+    let st = &scene.truth;
+    for k in 0..2 {
+        let n = fits[k].iter().map(Vec::len).max().unwrap_or(0);
+        let m = fits[k].len() as f64;
+        let mean: Vec<f64> = (0..n)
+            .map(|j| {
+                fits[k]
+                    .iter()
+                    .map(|c| c.get(j).copied().unwrap_or(0.0))
+                    .sum::<f64>()
+                    / m
+            })
+            .collect();
+        let bias = over_outline(st, &mean, truth[k].coefficients_nm());
+        let scatter = (fits[k]
+            .iter()
+            .map(|c| over_outline(st, c, &mean).powi(2))
+            .sum::<f64>()
+            / (m - 1.0).max(1.0))
+        .sqrt();
+        let rep = reported[k].iter().sum::<f64>() / m;
+        // Per coefficient (Noll 4+): the mean fit's bias and the scatter,
+        // each over the last realisation's reported σ.
+        let t = truth[k].coefficients_nm();
+        let per: Vec<String> = (REMOVED_TERMS..n.min(stds[k].len()))
+            .map(|j| {
+                let sd = (fits[k]
+                    .iter()
+                    .map(|c| (c.get(j).copied().unwrap_or(0.0) - mean[j]).powi(2))
+                    .sum::<f64>()
+                    / (m - 1.0).max(1.0))
+                .sqrt();
+                let b = mean[j] - t.get(j).copied().unwrap_or(0.0);
+                format!(
+                    "Z{}: bias {:.1}σ sd {:.2}σ",
+                    j + 1,
+                    b / stds[k][j],
+                    sd / stds[k][j]
+                )
+            })
+            .collect();
+        eprintln!(
+            "noise study {} per term: {}",
+            ["front", "back"][k],
+            per.join("; ")
+        );
+        eprintln!(
+            "noise study {}: {m} realisations, reported {rep:.2} nm, mean fit's error {bias:.2} \
+             nm, scatter about the mean {scatter:.2} nm",
+            ["front", "back"][k]
+        );
     }
 }

@@ -16,7 +16,9 @@
 //! - `MFD_WEDGE_SOAK_DRAWS=n`: draw `n` (default 100, ~3 minutes on 2 cores
 //!   in the test profile); `MFD_WEDGE_SOAK_SEED=s`: seed `s` alone;
 //!   `MFD_WEDGE_SOAK_FAILURES=path`: where failing seeds are appended
-//!   (default `target/wedge-soak-failures.txt`).
+//!   (default `target/wedge-soak-failures.txt`); with one seed,
+//!   `MFD_SOAK_NOISE_STUDY=k`: that draw under `k` noise realisations,
+//!   its bias and scatter against its report ([`noise_study`]), not judged.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -29,7 +31,7 @@ use mfd::sim::Falloff;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use super::chain::{run_scored, Scene};
+use super::chain::{noise_study, run_scored, Scene};
 
 /// One draw's actual error over its reported error, per reported surface:
 /// the RMS of ~33 unit z-scores lies within 0.6–1.4 at 4σ; the band is
@@ -48,13 +50,12 @@ const MAX_REFUSED: f64 = 0.35;
 
 const FIRST_SEED: u64 = 36_000;
 
-/// Seeds that fail for a reason found and not yet fixed: printed and saved
-/// like any failure, not asserted. Each is open in issue 36's note.
-/// - 36071: a 1.05 mm plate (7 arcmin declared, tilted 1.6°) on the
-///   400-frame schedule: the surface-domain fit converges, and its surfaces
-///   are 3.1× (front) and 2.7× (back) their reported error; thin plates on
-///   a schedule not designed for them are otherwise withheld.
-const KNOWN: &[u64] = &[36_071];
+// Seed 36071 (a 1.05 mm plate, 7 arcmin declared, tilted 1.6°) was a
+// confident wrong answer: the surface-domain fit from the per-pixel
+// surfaces converged to a second maximum, 3.1× and 2.7× the reported
+// error; the fit is now also run from the plate as made and the more
+// likely answer kept (`solve::direct::Starts`). It is among the default
+// draws and asserted like any other.
 
 /// Every drawn parameter of one element and station.
 #[derive(Debug, Clone)]
@@ -224,6 +225,10 @@ fn random_plates_are_measured_honestly_or_refused_in_words() {
             surface_rms_nm: draw.surface_rms_nm,
             falloff: draw.falloff,
         };
+        if let Some(k) = env_u64("MFD_SOAK_NOISE_STUDY") {
+            noise_study(&scene, k);
+            return;
+        }
         let dir = tempfile::tempdir().unwrap();
         let outcome = std::panic::catch_unwind(|| run_scored(&scene, dir.path(), false));
         match outcome {
@@ -281,12 +286,7 @@ fn random_plates_are_measured_honestly_or_refused_in_words() {
         worst.0,
         worst.1
     );
-    let new: Vec<u64> = failed
-        .iter()
-        .copied()
-        .filter(|s| !KNOWN.contains(s))
-        .collect();
-    assert!(new.is_empty(), "failing seeds: {new:?} (known: {KNOWN:?})");
+    assert!(failed.is_empty(), "failing seeds: {failed:?}");
     if seeds.len() > 1 {
         assert!(OVERALL.contains(&rms), "RMS error over reported {rms:.3}");
         assert!(

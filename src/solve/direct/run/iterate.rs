@@ -260,6 +260,7 @@ impl State {
             iterations: self.iterations,
             converged,
             third: self.third,
+            starts: None,
         })
     }
 }
