@@ -23,7 +23,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix2};
 
-use crate::kernels::lm::{minimise, Damping, LeastSquares, Linearisation};
+use crate::kernels::lm::{minimise, Damping, LeastSquares, NormalEquations};
 
 /// The loop's schedule: a start near the optimum (the moment centroid and
 /// widths), a small problem whose evaluation is one pass over the window:
@@ -78,25 +78,6 @@ pub struct Window<'a> {
 /// `[cx, cy, flux, sx, sy, offset]`.
 pub type Params = [f64; 6];
 
-/// The fit's normal equations at one point (χ² units).
-pub struct Normal {
-    cost: f64,
-    jtj: DMatrix<f64>,
-    jtr: DVector<f64>,
-}
-
-impl Linearisation for Normal {
-    fn cost(&self) -> f64 {
-        self.cost
-    }
-    fn jtj(&self) -> &DMatrix<f64> {
-        &self.jtj
-    }
-    fn jtr(&self) -> &DVector<f64> {
-        &self.jtr
-    }
-}
-
 fn pdf(u: f64) -> f64 {
     (-0.5 * u * u).exp() / (2.0 * std::f64::consts::PI).sqrt()
 }
@@ -115,10 +96,10 @@ fn share(i: usize, c: f64, s: f64) -> [f64; 3] {
 
 impl LeastSquares for Window<'_> {
     type Params = Params;
-    type Normal = Normal;
+    type Normal = NormalEquations;
     type Error = ();
 
-    fn evaluate(&self, p: &Params) -> Normal {
+    fn evaluate(&self, p: &Params) -> NormalEquations {
         let [cx, cy, flux, sx, sy, offset] = *p;
         let gx: Vec<[f64; 3]> = (0..self.size)
             .map(|a| share(self.origin[0] + a, cx, sx))
@@ -157,7 +138,7 @@ impl LeastSquares for Window<'_> {
                 jtj[(n, m)] = jtj[(m, n)];
             }
         }
-        Normal { cost, jtj, jtr }
+        NormalEquations { cost, jtj, jtr }
     }
 
     fn moved(&self, p: &Params, step: &DVector<f64>) -> Result<Params, ()> {
@@ -181,7 +162,7 @@ impl LeastSquares for Window<'_> {
         step[0].abs().max(step[1].abs()) < 1e-7
     }
 
-    fn decrease_tolerance(&self, _at: &Normal) -> Option<f64> {
+    fn decrease_tolerance(&self, _at: &NormalEquations) -> Option<f64> {
         // χ² units: a fall of 1e-8 moves the centre by 1e-4 of its σ.
         Some(1e-8)
     }

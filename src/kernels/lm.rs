@@ -107,6 +107,31 @@ pub trait Linearisation {
     fn jtr(&self) -> &DVector<f64>;
 }
 
+/// Normal equations and nothing more: the [`Linearisation`] of a problem
+/// that keeps no other state at a point (a problem that does, e.g. a
+/// prior's part of the cost, implements the trait on its own struct).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NormalEquations {
+    /// The cost (residual sum of squares, or χ²).
+    pub cost: f64,
+    /// `JᵀJ`.
+    pub jtj: DMatrix<f64>,
+    /// `Jᵀr`.
+    pub jtr: DVector<f64>,
+}
+
+impl Linearisation for NormalEquations {
+    fn cost(&self) -> f64 {
+        self.cost
+    }
+    fn jtj(&self) -> &DMatrix<f64> {
+        &self.jtj
+    }
+    fn jtr(&self) -> &DVector<f64> {
+        &self.jtr
+    }
+}
+
 /// A least-squares problem for [`minimise`].
 pub trait LeastSquares {
     /// The parameters.

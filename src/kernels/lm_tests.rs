@@ -9,35 +9,17 @@ use super::*;
 /// classic start (−1.2, 1); the minimum is (1, 1) with cost 0 (closed form).
 struct Rosenbrock;
 
-struct Lin {
-    cost: f64,
-    jtj: DMatrix<f64>,
-    jtr: DVector<f64>,
-}
-
-impl Linearisation for Lin {
-    fn cost(&self) -> f64 {
-        self.cost
-    }
-    fn jtj(&self) -> &DMatrix<f64> {
-        &self.jtj
-    }
-    fn jtr(&self) -> &DVector<f64> {
-        &self.jtr
-    }
-}
-
 impl LeastSquares for Rosenbrock {
     type Params = [f64; 2];
-    type Normal = Lin;
+    type Normal = NormalEquations;
     type Error = Infallible;
 
-    fn evaluate(&self, p: &[f64; 2]) -> Lin {
+    fn evaluate(&self, p: &[f64; 2]) -> NormalEquations {
         // Residuals as data − model with data 0: r = −f, J = ∂f.
         let f = DVector::from_column_slice(&[10.0 * (p[1] - p[0] * p[0]), 1.0 - p[0]]);
         let j = DMatrix::from_row_slice(2, 2, &[-20.0 * p[0], 10.0, -1.0, 0.0]);
         let r = -&f;
-        Lin {
+        NormalEquations {
             cost: f.norm_squared(),
             jtj: j.transpose() * &j,
             jtr: j.transpose() * r,
@@ -52,7 +34,7 @@ impl LeastSquares for Rosenbrock {
         step.amax() < 1e-12
     }
 
-    fn decrease_tolerance(&self, at: &Lin) -> Option<f64> {
+    fn decrease_tolerance(&self, at: &NormalEquations) -> Option<f64> {
         Some(1e-30 * at.cost.max(1e-300))
     }
 }
@@ -67,7 +49,7 @@ const SCHEDULE: Damping = Damping {
     stall: None,
 };
 
-fn run(max_trials: usize) -> Outcome<[f64; 2], Lin> {
+fn run(max_trials: usize) -> Outcome<[f64; 2], NormalEquations> {
     let start = [-1.2, 1.0];
     let at = Rosenbrock.evaluate(&start);
     let Ok(out) = minimise(&Rosenbrock, start, at, &SCHEDULE, max_trials);
@@ -98,7 +80,7 @@ fn stops_at_the_trial_limit() {
 #[test]
 fn a_singular_system_stops_without_evaluating() {
     // A NaN curvature cannot be factored at any damping.
-    let at = Lin {
+    let at = NormalEquations {
         cost: 1.0,
         jtj: DMatrix::from_element(2, 2, f64::NAN),
         jtr: DVector::zeros(2),
