@@ -246,8 +246,7 @@ fn the_weak_direction_is_written_and_the_check_warns_with_the_fix() {
 fn a_plate_on_the_calibrated_narrow_station_is_within_its_reported_uncertainty() {
     // Issue 35's done-when on its own layout (layers 20 mm apart, 75
     // targets, 0.08 px): a plate measured on the calibrated station within
-    // 20 nm RMS and within 0.5–2× the error it reports (the lower end not
-    // met: see below). Per seed the
+    // 20 nm RMS and within 0.5–2× the error it reports. Per seed the
     // error is one draw of the station's error projected on the surfaces
     // (a few degrees of freedom carry it), so the ratio is judged pooled
     // over the seeds' four surfaces (RMS), each surface at most 2×. The
@@ -259,9 +258,12 @@ fn a_plate_on_the_calibrated_narrow_station_is_within_its_reported_uncertainty()
     for seed in [3, 4] {
         let sim = simulate_session(&truth, &narrow_spec(seed, 20.0)).unwrap();
         let cal = calibrate(&sim.input).unwrap();
-        for (face, (error, reported)) in ["front", "back"]
-            .into_iter()
-            .zip(crate::calibrate_chain::plate_on_calibrated(&truth, &cal, 4))
+        for (face, (error, reported)) in
+            ["front", "back"]
+                .into_iter()
+                .zip(crate::calibrate_chain::plate_on_calibrated(
+                    &sim.truth, &cal, 4,
+                ))
         {
             println!("seed {seed} {face}: error {error:.2} nm, reported {reported:.2} nm");
             assert!(error <= 20.0, "seed {seed} {face}: {error:.2} nm");
@@ -277,11 +279,48 @@ fn a_plate_on_the_calibrated_narrow_station_is_within_its_reported_uncertainty()
         "RMS error / reported over {} surfaces: {rms:.2}",
         ratios.len()
     );
-    // Issue 35 asks for 0.5–2×; measured 0.39 (seeds 3, 4: the
-    // calibration's part, 4.0–4.2 nm of the 4.1–4.5 reported, is about
-    // twice what the station's actual error leaves: 1.1–2.4 nm; the wide
-    // station of calibrate_chain gives 0.39–0.52). The reported error is
-    // conservative there, which is open; what is asserted is that it is
-    // never over-confident.
-    assert!(rms <= 2.0, "RMS error/reported {rms:.2}");
+    // Issue 35's band, 0.5–2×: measured 0.87 (seeds 3, 4: 2.1–4.0 nm
+    // against 3.2–3.6 reported). It was 0.39 while the valley's curvature
+    // term put the long directions' bend into one another on their own
+    // diagonal (σ(camera.z) 2.08 mm for a scatter of 1.31, see
+    // `the_weak_directions_sigma_matches_its_scatter`) and while the plate
+    // was traced on the station before the session drew its element's
+    // in-plane offset.
+    assert!((0.5..=2.0).contains(&rms), "RMS error/reported {rms:.2}");
+}
+
+#[test]
+fn the_weak_directions_sigma_matches_its_scatter() {
+    // The weak "dolly zoom" of the issue's layout (layers 20 mm apart)
+    // carries the plate's share of the calibration's error (focal length,
+    // camera and screen heights: 270, 120 and 115 nm per σ on the plate
+    // below), so its σ must be its scatter, not only cover it. Over 40
+    // seeds the mean (error/σ)² of camera.z is χ²(40)/40 when the σ is
+    // right: within [0.45, 1.84] with probability 0.998 (χ²(40) quantiles
+    // 17.9 and 73.4 at 0.001 and 0.999). Measured 1.06; 0.40 when the
+    // valley's curvature term let its settling move along the other long
+    // directions (σ(camera.z) 2.08 mm for a scatter of 1.31).
+    let truth = narrow_truth();
+    let seeds = 100..140;
+    let mut z2 = Vec::new();
+    for seed in seeds.clone() {
+        let sim = simulate_session(&truth, &narrow_spec(seed, 20.0)).unwrap();
+        let cal = calibrate(&sim.input).unwrap();
+        let (_, _, each) = chi2_of_errors(&sim, &cal);
+        let (_, z) = each
+            .iter()
+            .find(|(n, _)| n == "camera.z_mm")
+            .expect("camera.z is estimated")
+            .clone();
+        z2.push(z);
+    }
+    let mean = z2.iter().sum::<f64>() / z2.len() as f64;
+    println!(
+        "camera.z: mean (error/σ)² {mean:.3} over {} seeds",
+        z2.len()
+    );
+    assert!(
+        (17.9 / 40.0..=73.4 / 40.0).contains(&mean),
+        "mean (error/σ)² of camera.z {mean:.3} over seeds {seeds:?}"
+    );
 }
