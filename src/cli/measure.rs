@@ -62,6 +62,20 @@ pub struct MeasureArgs {
     /// Simulated cameras: the element's true surfaces (mfd-surfaces/1 or /2); flat when omitted.
     #[arg(long)]
     sim_surfaces: Option<PathBuf>,
+    /// Simulated cameras: the plate's true wedge between its faces, arcmin
+    /// (the station's own when omitted): a plate made otherwise than the
+    /// station declares.
+    #[arg(long, value_parser = super::check::range(0.0, mfd::optics::station::MAX_WEDGE_ARCMIN, "a wedge in arcmin"))]
+    sim_wedge_arcmin: Option<f64>,
+    /// Simulated cameras: the true wedge's azimuth, degrees from the
+    /// element's +x' towards +y'.
+    #[arg(long, value_parser = super::check::finite, default_value_t = 0.0, requires = "sim_wedge_arcmin", allow_hyphen_values = true)]
+    sim_wedge_azimuth_deg: f64,
+    /// Start from the station's wedge without looking in the recorded
+    /// frames for the back reflection first (as `mfd reconstruct
+    /// --keep-station-wedge`).
+    #[arg(long)]
+    keep_station_wedge: bool,
     /// Simulated cameras: read noise, standard deviation as a fraction of full scale.
     #[arg(long, value_parser = super::check::fraction, default_value_t = 0.0)]
     noise: f64,

@@ -13,6 +13,7 @@ use mfd::optics::trace::{Plate, DEFAULT_EDGE_MARGIN_MM};
 use nalgebra::{Point3, Unit, Vector3};
 
 pub mod chain;
+pub mod live;
 pub mod soak;
 
 fn v2_with(element_lines: &str) -> String {

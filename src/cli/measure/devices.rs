@@ -9,7 +9,7 @@ use anyhow::Context;
 
 use mfd::acquire::camera::{Camera, CameraConfig, CameraSpec, PixelFormat};
 use mfd::acquire::display::{DisplayError, Dither, OffscreenDisplay, PatternDisplay, Shading};
-use mfd::optics::station::Station;
+use mfd::optics::station::{Station, Wedge};
 use mfd::sim::{MirroredDisplay, ScreenState, SimFaults, SimParams, SimulatedCamera};
 
 use super::MeasureArgs;
@@ -143,6 +143,22 @@ fn simulated_camera(
     screen: ScreenState,
 ) -> anyhow::Result<SimulatedCamera> {
     let (front, back) = super::super::load_surfaces(args.sim_surfaces.as_deref(), station)?;
+    // The plate as made: the station's, or wedged otherwise
+    // (--sim-wedge-arcmin): the back tilted by the difference.
+    let mut truth = station.clone();
+    let back = match args.sim_wedge_arcmin {
+        Some(arcmin) => {
+            let made = Wedge {
+                arcmin,
+                azimuth_deg: args.sim_wedge_azimuth_deg,
+            };
+            let ([a, b], [c, d]) = (made.slope(), station.element.wedge.slope());
+            truth.element.wedge = made;
+            Wedge::from_slope([a - c, b - d]).added_to(&back)?
+        }
+        None => back,
+    };
+    let station = &truth;
     let params = SimParams {
         bit_depth: args.bit_depth,
         noise_frac: args.noise,

@@ -2,6 +2,7 @@
 //! reconstruction with `mfd reconstruct`'s stages, the result folder and
 //! the report page.
 
+use mfd::acquire::acquisition::Acquisition;
 use mfd::live::{Measurement, Report};
 use mfd::optics::station::Station;
 use mfd::optics::trace::DEFAULT_EDGE_MARGIN_MM;
@@ -32,7 +33,40 @@ pub(super) fn finish(
             s.fitting(done, total);
         }
     };
-    let mut rec = pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut fitting)?;
+    // The streamed solver started from the station's wedge. The recording
+    // says whether the back reflection lies there (the search reads a few
+    // hundred pixels of it); where the frames show another wedge, the
+    // points are fitted again from the recording with the wedge found, as
+    // `mfd reconstruct` would, and where they show one that cannot be
+    // measured the run is refused naming it (the recording stays).
+    let dir = args.out.join("acquisition");
+    let check = if options.skip_wedge_search {
+        None
+    } else {
+        let acq = Acquisition::open(&dir)?;
+        pipeline::wedge::check_wedge(&acq, &station.element_frame(), &options.spectral)?.1
+    };
+    let mut rec = if check.is_some_and(|c| c.used_found) {
+        eprintln!(
+            "the streamed points started from the station's wedge, which the frames do not \
+             show: fitting them again from {}",
+            dir.display()
+        );
+        let mut acq = Acquisition::open(&dir)?;
+        pipeline::reconstruct(
+            Input::Acquisition(&mut acq),
+            station,
+            &options,
+            &mut fitting,
+        )?
+    } else {
+        let mut rec =
+            pipeline::reconstruct(Input::Streamed(solver), station, &options, &mut fitting)?;
+        if let Some(s) = rec.spectral.as_mut() {
+            s.wedge = check;
+        }
+        rec
+    };
     if let Some(s) = rec.spectral.as_mut() {
         s.read_s = acquire_s;
         if let Some(served) = served {
@@ -109,6 +143,7 @@ fn options(args: &MeasureArgs, station: &Station) -> anyhow::Result<Options> {
         max_expected_nm,
         limits: args.checks.limits(),
         wavelength_nm: args.surfaces.wavelength_nm,
+        skip_wedge_search: args.keep_station_wedge,
         ..Options::default()
     };
     Ok(options)
