@@ -140,9 +140,7 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     use mfd::acquire::acquisition::FrameInfo;
     use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
     let station = Station::load(&args.station)?;
-    let (front, back) = random_surfaces(&station)?;
-    let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
-    let view = TracedView::trace(&station, &plate);
+    // The schedule is read before the sensor is traced: a bad file fails at once.
     let patterns = match &args.schedule {
         Some(p) => {
             let file = mfd::acquire::schedule_file::load(p)?;
@@ -151,6 +149,9 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
         }
         None => Schedule::default().patterns(),
     };
+    let (front, back) = random_surfaces(&station)?;
+    let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
+    let view = TracedView::trace(&station, &plate);
     let frames: Vec<FrameInfo> = FrameInfo::from_patterns(&patterns);
     let (w, h) = (station.camera.width, station.camera.height);
     let roi = (args.pixels > 0).then(|| {
