@@ -211,7 +211,7 @@ fn series(
 /// Whether `fits` (one pixel) found every reflection of `truth` at its
 /// true point, under the scene's model (`two`: the pair, else one).
 fn found(fits: &PixelFits, truth: &PixelPaths, two: bool) -> bool {
-    let Some(scored) = fits.per_model[usize::from(two)] else {
+    let Some(scored) = fits.model(usize::from(two)) else {
         return false;
     };
     let r = scored.result;
@@ -298,8 +298,7 @@ impl Judge<'_> {
         (
             usize::from(found(&fits, &self.truth.pixels[q], self.two)),
             usize::from(
-                fits.base
-                    .flags
+                fits.flags
                     .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
             ),
         )

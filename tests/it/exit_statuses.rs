@@ -199,6 +199,8 @@ fn cases(f: &Files) -> Vec<Case> {
         c(&["bench", "budget", "--terms", "1"], USAGE, "--terms 1"),
         c(&["bench", "surfaces", "--terms", "232"], USAGE, "--terms 232"),
         c(&["bench", "spectral", "--noise=-1"], USAGE, "noise < 0"),
+        c(&["bench", "spectral", "--schedule", m], INPUT, "missing schedule"),
+        c(&["bench", "spectral", "--schedule", nt], INPUT, "τ < 0 in a schedule"),
         c(&["bench", "bogus"], USAGE, "unknown bench"),
         // tradeoff
         c(&["tradeoff", "--station", m, "--out", o], INPUT, "missing station"),

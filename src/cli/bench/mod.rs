@@ -31,7 +31,7 @@ enum BenchKind {
     /// JSON line: trace_s, ms_per_frame (noise-free), ms_per_frame_noisy
     /// (5 % read noise and shot noise), pixels, lit_pixels, frames.
     Render(RenderArgs),
-    /// Stream simulated frames of the paper's schedule through a bounded
+    /// Stream simulated frames of the paper's schedule (or `--schedule`) through a bounded
     /// channel into the spectral solver, without disk; prints one JSON line:
     /// frames_per_s (ingestion), latency_after_last_frame_s (the solve),
     /// peak_rss_bytes, pixels (fitted), frames, the solve's µs per pixel, the
@@ -76,6 +76,10 @@ struct SpectralBenchArgs {
     /// Station; the default fills the 1296×966 sensor with the element.
     #[arg(long, default_value = "calib/bench-fill.toml")]
     station: PathBuf,
+    /// Stream the patterns of this schedule file (mfd-schedule/1, as `mfd
+    /// plan` writes) in its order, instead of the paper's schedule.
+    #[arg(long, value_name = "TOML")]
+    schedule: Option<PathBuf>,
     /// Fit only a centred square of about this many pixels (the solver
     /// holds 2 bytes per fitted pixel and frame); 0 for every pixel.
     #[arg(long, default_value_t = 20_000)]
@@ -136,10 +140,18 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
     use mfd::acquire::acquisition::FrameInfo;
     use mfd::solve::spectral::{SpectralConfig, SpectralSolver};
     let station = Station::load(&args.station)?;
+    // The schedule is read before the sensor is traced: a bad file fails at once.
+    let patterns = match &args.schedule {
+        Some(p) => {
+            let file = mfd::acquire::schedule_file::load(p)?;
+            file.check_against_screen(p, station.screen.width, station.screen.height)?;
+            file.patterns()
+        }
+        None => Schedule::default().patterns(),
+    };
     let (front, back) = random_surfaces(&station)?;
     let plate = Plate::new(&station, front, back, DEFAULT_EDGE_MARGIN_MM);
     let view = TracedView::trace(&station, &plate);
-    let patterns = Schedule::default().patterns();
     let frames: Vec<FrameInfo> = FrameInfo::from_patterns(&patterns);
     let (w, h) = (station.camera.width, station.camera.height);
     let roi = (args.pixels > 0).then(|| {
@@ -159,6 +171,10 @@ fn spectral(args: &SpectralBenchArgs) -> anyhow::Result<()> {
         ..SimParams::default()
     };
     let mut cam = Renderer::new(&view, &station.screen, params)?;
+    // The simulated camera keeps what it needs; the traced view of the
+    // simulated plate (~100 bytes a pixel) is no part of the instrument's
+    // memory and is not held beside the solver.
+    drop(view);
     let n_pix = station.camera.pixel_count();
     let quiet_ms = quiet_ingest_ms(&station, &frames, &config, &mut cam, &patterns[0])?;
     let mut solver = SpectralSolver::new(&station, &frames, config)?;
@@ -257,14 +273,18 @@ fn quiet_ingest_ms(
     let mut probe = mfd::solve::spectral::SpectralSolver::new(station, frames, config.clone())?;
     let mut frame = vec![0u16; station.camera.pixel_count()];
     cam.render(pattern, 0, &mut frame);
-    for k in 0..32 {
+    // 32 untimed and up to 192 timed, all before the schedule's last frame
+    // (whose push seals the statistics).
+    let end = frames.len().saturating_sub(1).min(224);
+    let warm = end.min(32);
+    for k in 0..warm {
         probe.push_frame(k, &frame)?;
     }
     let t = Instant::now();
-    for k in 32..224 {
+    for k in warm..end {
         probe.push_frame(k, &frame)?;
     }
-    Ok(t.elapsed().as_secs_f64() * 1e3 / 192.0)
+    Ok(t.elapsed().as_secs_f64() * 1e3 / (end - warm).max(1) as f64)
 }
 
 /// Streams the schedule into `solver` as a camera would: a thread renders

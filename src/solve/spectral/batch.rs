@@ -211,7 +211,7 @@ impl<'a> FitBatch<'a> {
                 Some((data, excluded)) => fit_samples_seeded(&ctx, &data, excluded, seed, out),
                 None => {
                     *out = PixelFits::none();
-                    out.base.flags = PixelFlags::SATURATED | PixelFlags::NO_DATA;
+                    out.flags = PixelFlags::SATURATED | PixelFlags::NO_DATA;
                     None
                 }
             };
@@ -254,7 +254,7 @@ pub struct CpuFits;
 impl FitBackend for CpuFits {
     fn fit(&self, batch: &mut FitBatch) -> Vec<PixelFits> {
         // Written in place, run by run: the results of a full sensor are
-        // ~1.3 GB, too much to hold twice.
+        // ~0.4 GB, too much to hold twice.
         let mut out = batch.output();
         let batch = &*batch;
         let mut parts = Vec::new();

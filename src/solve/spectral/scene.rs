@@ -3,6 +3,7 @@
 
 use rayon::prelude::*;
 
+use super::model::MAX_REFLECTIONS;
 use super::pixel::{PixelFits, Scored};
 use super::prior::GeometryPrior;
 use super::{PixelFlags, PixelResult};
@@ -26,11 +27,11 @@ pub(super) fn scene_model(results: &[PixelFits], allow_third: bool) -> (usize, [
         .map(|chunk| {
             let mut sums = [0.0; 3];
             for f in chunk {
-                if f.per_model[..top].iter().all(Option::is_some) {
-                    for (k, c) in f.per_model[..top].iter().enumerate() {
-                        sums[k] += c.map_or(0.0, |c| c.bic);
+                if (0..top).all(|k| f.model(k).is_some()) {
+                    for (k, sum) in sums.iter_mut().enumerate().take(top) {
+                        *sum += f.model(k).map_or(0.0, |c| c.bic);
                     }
-                } else if let (2, Some(one), Some(two)) = (top, f.one_bic, f.per_model[1]) {
+                } else if let (2, Some(one), Some(two)) = (top, f.one_bic, f.model(1)) {
                     // A warm pixel: the one-reflection BIC from its pair's
                     // weaker amplitude.
                     sums[0] += one;
@@ -69,13 +70,12 @@ pub(super) fn pixel_answers(
     for (q, &p) in prior.candidates.iter().enumerate() {
         index[p as usize] = q as u32;
     }
-    let own = |models: &[Option<Scored>]| {
-        models
-            .iter()
-            .enumerate()
-            .filter_map(|(k, c)| c.map(|c| (k, c)))
+    // The model among the first `top` that this pixel's own BIC prefers.
+    fn own(fits: &PixelFits, top: usize) -> Option<(usize, &Scored)> {
+        (0..top)
+            .filter_map(|k| fits.model(k).map(|c| (k, c)))
             .min_by(|a, b| a.1.bic.total_cmp(&b.1.bic))
-    };
+    }
     let mut pixels = pixels
         .filter(|v| v.len() == index.len())
         .unwrap_or_else(|| vec![no_data(); index.len()]);
@@ -97,17 +97,12 @@ pub(super) fn pixel_answers(
             // may not (the offset is borrowed), the pixel's own BIC decides.
             let rim = view.pixels[p].back.is_err();
             let chosen = if rim {
-                own(&fits.per_model[..scene_model]).map(|(_, c)| c)
+                own(fits, scene_model).map(|(_, c)| c)
             } else {
-                fits.per_model[..scene_model]
-                    .iter()
-                    .rev()
-                    .flatten()
-                    .next()
-                    .copied()
+                (0..scene_model).rev().find_map(|k| fits.model(k))
             };
-            *out = chosen.map_or(fits.base, |c| c.result);
-            *pref = own(&fits.per_model).map_or(0, |(k, _)| k as u8 + 1);
+            *out = chosen.map_or_else(|| fits.base(), |c| c.result);
+            *pref = own(fits, MAX_REFLECTIONS).map_or(0, |(k, _)| k as u8 + 1);
         });
     (pixels, preferred)
 }

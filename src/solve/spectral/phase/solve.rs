@@ -107,12 +107,12 @@ pub(in crate::solve::spectral) fn solve_all(
             Some(first) => second_pass(model, s, first, law, settings),
             None => {
                 let mut out = PixelFits::none();
-                out.base.flags = PixelFlags::NO_SIGNAL;
+                out.flags = PixelFlags::NO_SIGNAL;
                 if s.excluded > 0 {
-                    out.base.flags |= PixelFlags::SATURATED;
+                    out.flags |= PixelFlags::SATURATED;
                 }
                 if s.index.len() <= model.len() {
-                    out.base.flags = PixelFlags::NO_DATA | (out.base.flags & PixelFlags::SATURATED);
+                    out.flags = PixelFlags::NO_DATA | (out.flags & PixelFlags::SATURATED);
                 }
                 out
             }
@@ -309,20 +309,20 @@ fn second_pass(
     };
     let mut out = PixelFits::none();
     if s.excluded > 0 {
-        out.base.flags |= PixelFlags::SATURATED;
+        out.flags |= PixelFlags::SATURATED;
     }
     let Some(cov) = fit.jtj.clone().cholesky().map(|c| c.inverse() * scale) else {
-        out.base.flags |= PixelFlags::NO_SIGNAL;
+        out.flags |= PixelFlags::NO_SIGNAL;
         return out;
     };
     let flags = pixel_flags(model, &fit, &cov, &first.unwrapped, sigma2);
     if flags.contains(PixelFlags::NO_SIGNAL) {
         // Without a fringe, unwrapping has nothing to be ambiguous about.
-        out.base.flags |= flags - PixelFlags::UNRESOLVED;
+        out.flags |= flags - PixelFlags::UNRESOLVED;
         return out;
     }
     let mut r = PixelResult::empty();
-    r.flags = out.base.flags | flags | PixelFlags::ONE_REFLECTION;
+    r.flags = out.flags | flags | PixelFlags::ONE_REFLECTION;
     r.model = 1;
     r.iterations = (first.fit.iterations + fit.iterations) as u16;
     r.residual_rms = (rss / n as f64).sqrt();
@@ -346,7 +346,7 @@ fn second_pass(
         }
     }
     let bic = n as f64 * (rss / n as f64).max(1e-300).ln() + p as f64 * (n as f64).ln();
-    out.per_model[0] = Some(Scored { result: r, bic });
+    out.set_model(0, Some(Scored { result: r, bic }));
     out
 }
 

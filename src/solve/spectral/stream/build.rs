@@ -114,6 +114,7 @@ impl SpectralSolver {
             stats,
             block: Vec::with_capacity(block_len * c),
             block_start: 0,
+            spans: spans(&prior.candidates),
             design,
             plans,
             prior,
@@ -202,4 +203,19 @@ pub fn design(station: &Station, frames: &[FrameInfo]) -> Result<Design, Spectra
         });
     }
     Ok(Design::new(metas, axes, directions_deg))
+}
+
+/// The candidates (increasing camera indices) as spans `(first, length)`
+/// of consecutive camera pixels: a frame's candidates are gathered span by
+/// span, each one copy.
+fn spans(candidates: &[u32]) -> Vec<(usize, usize)> {
+    let mut spans: Vec<(usize, usize)> = Vec::new();
+    for &p in candidates {
+        let p = p as usize;
+        match spans.last_mut() {
+            Some((first, len)) if *first + *len == p => *len += 1,
+            _ => spans.push((p, 1)),
+        }
+    }
+    spans
 }
