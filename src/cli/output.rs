@@ -80,15 +80,43 @@ pub fn write_and_print(
         Some(c) if !c.consistent && !checks.accept_inconsistent => Err(classified(
             Class::Inconsistent,
             anyhow::anyhow!(
-                "{}; the result in {} is complete but flagged (consistency.json, summary.json \
+                "{}{}; the result in {} is complete but flagged (consistency.json, summary.json \
                  \"consistency\"); if the station is right and the part departs that far from \
                  flat, rerun with --max-departure-nm, or --accept-inconsistent to exit 0",
                 c.note,
+                wedge_seen(rec),
                 out.display()
             ),
         )),
         _ => Ok(()),
     }
+}
+
+/// Where the points contradict the station and the wedge search saw a back
+/// reflection away from the station's wedge, on too few sample pixels to
+/// measure from ([`mfd::pipeline::wedge::FOUND_SHARE`]): that wedge, named,
+/// and the station fields to set (a plate wedged otherwise than declared,
+/// on a schedule whose τ span barely separates its back from the front).
+fn wedge_seen(rec: &Reconstruction) -> String {
+    use mfd::pipeline::wedge::{SEEN_SHARE, SHIFT_BINS};
+    let Some(w) = rec.spectral.as_ref().and_then(|s| s.wedge) else {
+        return String::new();
+    };
+    let s = &w.search;
+    if w.used_found || s.seen_share < SEEN_SHARE || s.shift_bins < SHIFT_BINS {
+        return String::new();
+    }
+    format!(
+        "; the frames show a back reflection where a wedge of {:.2} arcmin at azimuth {:.1}° \
+         would put it, on {:.0} % of {} sample pixels (where the station's wedge puts it: \
+         {:.0} %), too few to measure from: if the plate is wedged, set element.wedge_arcmin \
+         and wedge_azimuth_deg in the station (mfd-station/2) to the wedge it was made with",
+        s.wedge.arcmin,
+        s.wedge.azimuth_deg,
+        100.0 * s.seen_share,
+        s.pixels,
+        100.0 * s.declared_seen_share
+    )
 }
 
 fn summarise(maps: &SpectralMaps, fitted: usize, read_s: f64, solve_s: f64) {

@@ -44,6 +44,16 @@ pub fn mfd_status(args: &[&str]) -> (i32, String) {
 }
 
 /// Runs the `mfd` binary with `args` and returns what it did.
+/// A finished command's stdout and stderr together, as text (what an
+/// assertion message shows).
+pub fn output_text(out: &std::process::Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
 pub fn mfd(args: &[&str]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_mfd"))
         .args(args)

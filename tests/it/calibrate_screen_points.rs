@@ -72,28 +72,6 @@ fn screen_points_narrow_the_screen_pose() {
     assert!((j.chi2_per_dof - 1.0).abs() < 5.0 * (2.0 / j.dof as f64).sqrt());
 }
 
-/// `(estimate − truth)ᵀ C⁻¹ (estimate − truth)` over every reported
-/// parameter and their number.
-fn chi2_of_errors(sim: &SimulatedSession, cal: &Calibration) -> (f64, usize) {
-    let params: Vec<Param> = cal
-        .names
-        .iter()
-        .map(|n| Param::from_name(n).unwrap())
-        .collect();
-    let truth = State {
-        frame: sim.frame,
-        station: sim.truth.clone(),
-    };
-    let est = State {
-        frame: cal.frame,
-        station: cal.station.clone(),
-    };
-    let e = DVector::from_vec(difference(&truth, &est, &params));
-    let c: &DMatrix<f64> = &cal.covariance;
-    let chol = c.clone().cholesky().expect("positive definite");
-    (e.dot(&chol.solve(&e)), params.len())
-}
-
 #[test]
 fn with_screen_points_the_errors_follow_the_reported_covariance() {
     // As the honesty test without marks: each seed's χ² of the errors is
@@ -107,7 +85,7 @@ fn with_screen_points_the_errors_follow_the_reported_covariance() {
     for seed in 200..200 + seeds {
         let sim = session(seed, MARKS);
         let cal = calibrate(&sim.input).unwrap();
-        let (chi2, n) = chi2_of_errors(&sim, &cal);
+        let (chi2, n, _) = crate::calibrate_adjust::chi2_of_errors(&sim, &cal);
         sum += chi2;
         k = n;
         let names: Vec<&str> = SCREEN_POSE

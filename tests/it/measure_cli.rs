@@ -3,6 +3,7 @@
 //! disconnect and its resume, Ctrl-C, and backends not built.
 
 use crate::common;
+use crate::common::output_text as text;
 
 use std::path::Path;
 
@@ -41,14 +42,6 @@ fn measure(out: &Path, extra: &[&str]) -> std::process::Output {
     ];
     args.extend_from_slice(extra);
     mfd(&args)
-}
-
-fn text(out: &std::process::Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    )
 }
 
 #[test]

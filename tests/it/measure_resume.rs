@@ -4,6 +4,7 @@
 //! appends nothing.
 
 use crate::common;
+use crate::common::output_text as text;
 
 use std::path::Path;
 
@@ -30,14 +31,6 @@ fn measure(station: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
     ];
     args.extend_from_slice(extra);
     mfd(&args)
-}
-
-fn text(out: &std::process::Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    )
 }
 
 /// SHA-256 of `bytes`, lower-case hex (sha2 directly, not mfd's helper).
