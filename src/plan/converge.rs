@@ -50,7 +50,7 @@ use crate::optics::station::Station;
 use crate::optics::trace::{PixelPaths, TracedView};
 use crate::solve::direct::pixel::{linearise, moved, start};
 use crate::solve::direct::DirectOptions;
-use crate::solve::spectral::model::{Design, RepeatSamples, Repeats, Samples, MAX_PARAMS};
+use crate::solve::spectral::model::{Design, RepeatSamples, Repeats, Samples};
 use crate::solve::spectral::periodogram::SpectrumPlans;
 
 /// Grid of starts scanned per direction, between 0 and twice the prior's
@@ -166,19 +166,7 @@ fn pixel_converges(
     }
     // The noise-free series: one model value per distinct frame, summed
     // over its repeats (the series' least squares; see `RepeatSamples`).
-    let mut row = [0.0; MAX_PARAMS];
-    let means: Vec<f64> = repeats
-        .first
-        .iter()
-        .map(|&f| {
-            crate::solve::spectral::model::eval_row(
-                design,
-                &design.frames[f as usize],
-                &t,
-                &mut row,
-            )
-        })
-        .collect();
+    let means = repeats.model_values(design, &t);
     let y: Vec<f64> = repeats
         .of_frame
         .iter()

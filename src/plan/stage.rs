@@ -27,7 +27,7 @@ use serde::Serialize;
 
 use crate::optics::trace::{PixelPaths, TracedView};
 use crate::solve::spectral::model::{
-    Design, Falloff, Params, RepeatSamples, Repeats, Samples, MAX_PARAMS, MAX_REFLECTIONS,
+    Design, Falloff, Params, RepeatSamples, Repeats, Samples, MAX_REFLECTIONS,
 };
 use crate::solve::spectral::periodogram::SpectrumPlans;
 use crate::solve::spectral::pixel::{fit_samples_seeded, PixelContext, PixelFits};
@@ -184,19 +184,7 @@ fn series(
     let p = truth_params(design, truth, gain, r);
     let full = f64::from((1u32 << r.bit_depth.min(16)) - 1);
     let sigma = r.sigma_counts();
-    let mut row = [0.0; MAX_PARAMS];
-    let means: Vec<f64> = repeats
-        .first
-        .iter()
-        .map(|&f| {
-            crate::solve::spectral::model::eval_row(
-                design,
-                &design.frames[f as usize],
-                &p,
-                &mut row,
-            )
-        })
-        .collect();
+    let means = repeats.model_values(design, &p);
     repeats
         .of_frame
         .iter()

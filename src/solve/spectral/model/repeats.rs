@@ -79,6 +79,16 @@ impl Repeats {
         normal_equations_repeated(design, &self.schedule, p, false).jtj
     }
 
+    /// The model's value at `p` on each distinct frame of `design` (the
+    /// frame's direction, τ and phase decide it: every repeat has it).
+    pub fn model_values(&self, design: &Design, p: &Params) -> Vec<f64> {
+        let mut row = [0.0; MAX_PARAMS];
+        self.first
+            .iter()
+            .map(|&f| eval_row(design, &design.frames[f as usize], p, &mut row))
+            .collect()
+    }
+
     /// Distinct frames.
     pub fn len(&self) -> usize {
         self.first.len()
