@@ -279,11 +279,7 @@ impl Rows {
                 r += 1;
             }
         });
-        let mut gram = DMatrix::zeros(n, n);
-        if r > 0 {
-            let jt = cols.columns(0, r);
-            gram.gemm(1.0, &jt, &jt.transpose(), 0.0);
-        }
+        let gram = crate::kernels::gram::gram_of_columns(cols.as_slice(), n, r);
         (gram, r, failed)
     }
 

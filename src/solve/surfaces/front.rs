@@ -63,8 +63,8 @@ fn fit_slopes_parallel(
                 rhs[2 * k] = s.sx * r;
                 rhs[2 * k + 1] = s.sy * r;
             }
-            let (mut a, mut b) = zero();
-            a.gemm(1.0, &cols, &cols.transpose(), 0.0);
+            let a = crate::kernels::gram::gram_of_columns(cols.as_slice(), p, 2 * chunk.len());
+            let mut b = DVector::<f64>::zeros(p);
             b.gemv(1.0, &cols, &rhs, 0.0);
             (a, b)
         },

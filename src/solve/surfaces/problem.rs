@@ -206,12 +206,10 @@ fn accumulate_chunk(
     out.chi2 = used.norm_squared();
     out.n_resid = r;
     if p > 0 && r > 0 {
-        // JᵀJ as (Jᵀ)(Jᵀ)ᵀ through `gemm`, which nalgebra hands to
-        // matrixmultiply's blocked kernel (`gemm_tr` would use dot products).
-        let jt = cols.columns(0, r);
-        let j = jt.transpose();
-        out.a.gemm(1.0, &jt, &j, 0.0);
-        out.b.gemv(1.0, &jt, &used, 0.0);
+        // JᵀJ as (Jᵀ)(Jᵀ)ᵀ through matrixmultiply's blocked kernel, the
+        // transpose a view (`gemm_tr` would use dot products).
+        out.a = crate::kernels::gram::gram_of_columns(cols.as_slice(), p, r);
+        out.b.gemv(1.0, &cols.columns(0, r), &used, 0.0);
     }
     out
 }
