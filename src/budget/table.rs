@@ -44,7 +44,7 @@ pub fn noll_name(j: usize) -> &'static str {
 
 /// Root sum of squares over j ≥ 4 (index 3 on) of per-coefficient values.
 pub fn rss_j4(values: &[f64]) -> f64 {
-    values.iter().skip(3).map(|v| v * v).sum::<f64>().sqrt()
+    values.iter().skip(3).fold(0.0, |s, v| s + v * v).sqrt()
 }
 
 /// The total 1σ per coefficient of one surface (`back`): the root of the

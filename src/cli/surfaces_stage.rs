@@ -33,7 +33,9 @@ pub struct SurfaceArgs {
     pub estimator: mfd::pipeline::Estimator,
     /// Report a surface as not reconstructed (with the reason) when its
     /// expected RMS error exceeds this, nm; without it, only when the
-    /// expected error is as large as the fitted surface.
+    /// expected error is as large as the fitted surface. A plane (no term
+    /// beyond tilt: a flat face) is reported, flat within its expected
+    /// error, only where this limit holds it; without it, it is withheld.
     #[arg(long, value_parser = super::check::positive)]
     pub max_expected_nm: Option<f64>,
     /// Wavelength of the transmitted wavefront's figure in waves

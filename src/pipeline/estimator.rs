@@ -149,8 +149,27 @@ pub fn withheld(
                  its frame limit does"
             ));
         }
-        // With no term beyond tilt (the criterion chose a plane) there is
-        // nothing to resolve: the plane is the answer, not noise.
+        // With no term beyond tilt (the criterion kept the plane, or
+        // `--terms 3`) the fitted RMS is 0 and says nothing: what the face's
+        // figure may be is the dropped terms' estimate, `expected` (its
+        // `truncation_rms_nm`). Whether "flat within that" is an answer is
+        // the caller's to say: with `--max-expected-nm` holding it, the
+        // plane is reported (a flat window measured to what was asked);
+        // without, it is withheld naming that estimate. (Reported always,
+        // the estimate overstates small outlines' error 4–10×: the outline
+        // soak's planes, 12.9 nm against 124.7 reported.)
+        if figures.terms <= crate::solve::surfaces::report::REMOVED_TERMS {
+            if limit_nm.is_some() {
+                return None;
+            }
+            return Some(format!(
+                "the criterion kept no term beyond tilt: the {name} shows no figure this \
+                 acquisition resolves, and the dropped terms' estimate puts it at up to \
+                 {expected:.1} nm RMS (piston and tilt removed); give `--max-expected-nm` at or \
+                 above that to have the plane reported, flat within it, or `mfd plan \
+                 --target-nm` designs a schedule that resolves less"
+            ));
+        }
         (expected > 0.0 && expected >= figures.rms_nm).then(|| {
             format!(
                 "{what} as large as the fitted surface itself ({:.1} nm RMS): this acquisition \

@@ -263,7 +263,7 @@ fn surface_bounds(
     let sol = reconstruct(&observations, station, &scene_opts.surface_options())?;
     let surface = |std: &[f64]| SurfacePrediction {
         std_nm: std.to_vec(),
-        rms_nm: std.iter().skip(3).map(|s| s * s).sum::<f64>().sqrt(),
+        rms_nm: std.iter().skip(3).fold(0.0, |a, s| a + s * s).sqrt(),
     };
     let back = (sol.back_fitted && with_back).then(|| surface(&sol.back_std_nm));
     let front = surface(&sol.front_std_nm);

@@ -248,7 +248,9 @@ pub fn wedge(d: &[f64], radius_mm: f64) -> (f64, f64) {
 pub fn plate_values(input: &FigureInput<'_>, grid: &Grid) -> [f64; 4] {
     let d = difference(input.front_nm, input.back_nm);
     let (w, az) = wedge_of(&d, input);
-    let rms = d.iter().skip(3).map(|x| x * x).sum::<f64>().sqrt();
+    // Folded from +0.0: `Sum` starts at −0.0, and a plane's empty sum
+    // printed "RMS -0.00 nm".
+    let rms = d.iter().skip(3).fold(0.0, |s, x| s + x * x).sqrt();
     [w, az, grid.pv(&d, 3), rms]
 }
 

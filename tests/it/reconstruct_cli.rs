@@ -223,3 +223,69 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
         assert!(!out.status.success() && err.contains(needle), "{err}");
     }
 }
+
+/// A flat window, the commonest element there is: the criterion keeps the
+/// plane, whose fitted RMS is 0. Without a limit it is withheld naming the
+/// dropped terms' estimate and the option that accepts it; with
+/// `--max-expected-nm` above that estimate it is reported, flat within it.
+/// (Before: withheld as "as large as the fitted surface itself (-0.0 nm
+/// RMS)" with "`mfd plan --target-nm -0.0`", whatever the limit.)
+#[test]
+fn a_flat_window_is_withheld_or_reported_flat_as_the_limit_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let station = common::public_small().join("station.toml");
+    let acq = dir.path().join("acq");
+    let out = mfd(&[
+        "simulate",
+        "--station",
+        station.to_str().unwrap(),
+        "--noise",
+        "0.02",
+        "--out",
+        acq.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", common::output_text(&out));
+    let run = |name: &str, extra: &[&str]| {
+        let res = dir.path().join(name);
+        let mut args = vec![
+            "reconstruct",
+            acq.to_str().unwrap(),
+            "--out",
+            res.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let out = mfd(&args);
+        let text = common::output_text(&out);
+        assert!(out.status.success(), "{text}");
+        assert!(!text.contains("-0.0"), "{text}");
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap())
+                .unwrap();
+        (text, summary)
+    };
+    let (text, summary) = run("plain", &[]);
+    let mut largest = 0.0f64;
+    for (k, face) in ["front", "back"].into_iter().enumerate() {
+        let f = &summary[face];
+        assert_eq!(f["terms"], 3, "{face}: {f}");
+        assert_eq!(f["rms_nm"].as_f64().unwrap().to_bits(), 0.0f64.to_bits());
+        let expected = f["error_rms_nm"].as_f64().unwrap();
+        assert!(expected.is_finite() && expected > 0.0, "{face}: {f}");
+        largest = largest.max(expected);
+        let why = summary["withheld"][k].as_str().unwrap_or_default();
+        assert!(
+            why.contains("no term beyond tilt")
+                && why.contains(&format!("{expected:.1} nm"))
+                && why.contains("--max-expected-nm"),
+            "{face}: {why}\n{text}"
+        );
+    }
+    let limit = format!("{:.1}", 2.0 * largest);
+    let (text, summary) = run("limited", &["--max-expected-nm", &limit]);
+    assert_eq!(
+        summary["withheld"],
+        serde_json::json!([null, null]),
+        "{text}"
+    );
+    assert!(!text.contains("not reconstructed"), "{text}");
+}

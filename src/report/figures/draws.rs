@@ -64,7 +64,7 @@ pub(super) fn spread(input: &FigureInput<'_>, grid: &Grid) -> Spread {
                 }
             }
             let (w, az) = wedge_of(&diff, input);
-            let rms = diff.iter().skip(3).map(|x| x * x).sum::<f64>().sqrt();
+            let rms = diff.iter().skip(3).fold(0.0, |s, x| s + x * x).sqrt();
             plate.push([w, az, 0.0, rms]);
             for (k, v) in [&f, &b].into_iter().enumerate() {
                 let [rt, ri, ra] = face_rms(v);

@@ -136,7 +136,8 @@ pub fn figures(sol: &SurfaceSolution, back: bool) -> SurfaceFigures {
     };
     let a = q.coefficients(c);
     let cov_a = q.covariance(&cov);
-    let rms = q.rms(c, REMOVED_TERMS);
+    // `+ 0.0`: a plane's empty sum comes out −0.0, printed "-0.0 nm".
+    let rms = q.rms(c, REMOVED_TERMS) + 0.0;
     // δRMS = Σ (a_k / RMS) δa_k over the terms after the plane.
     let mut var = 0.0;
     for i in REMOVED_TERMS..a.len() {

@@ -183,7 +183,7 @@ pub fn from_columns(
 /// RMS over the aperture of a coefficient change, piston and tilt removed
 /// (Noll-normalised terms are orthonormal: the root sum of squares from j = 4).
 fn rms_from(d: &[f64]) -> f64 {
-    d.iter().skip(3).map(|x| x * x).sum::<f64>().sqrt()
+    d.iter().skip(3).fold(0.0, |s, x| s + x * x).sqrt()
 }
 
 /// √ of the covariance's trace over Noll j ≥ 4.
