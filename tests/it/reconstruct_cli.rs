@@ -11,25 +11,31 @@ use mfd::optics::station::Station;
 use mfd::solve::spectral::{Engine, PixelFlags, SpectralConfig, SpectralSolver};
 
 fn simulate(dir: &std::path::Path) -> std::path::PathBuf {
+    simulate_with(
+        dir,
+        &[
+            "--random-surfaces",
+            "4",
+            "--tau-start",
+            "0.5",
+            "--tau-stop",
+            "100",
+            "--tau-step",
+            "0.5",
+            "--noise",
+            "0.02",
+        ],
+    )
+}
+
+/// `mfd simulate` of the public small station into `dir/acq` with `extra`.
+fn simulate_with(dir: &std::path::Path, extra: &[&str]) -> std::path::PathBuf {
     let station = common::public_small().join("station.toml");
     let acq = dir.join("acq");
-    let out = mfd(&[
-        "simulate",
-        "--station",
-        station.to_str().unwrap(),
-        "--random-surfaces",
-        "4",
-        "--tau-start",
-        "0.5",
-        "--tau-stop",
-        "100",
-        "--tau-step",
-        "0.5",
-        "--noise",
-        "0.02",
-        "--out",
-        acq.to_str().unwrap(),
-    ]);
+    let mut args = vec!["simulate", "--station", station.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", acq.to_str().unwrap()]);
+    let out = mfd(&args);
     assert!(
         out.status.success(),
         "{}",
@@ -233,18 +239,7 @@ fn the_statistics_engine_gives_the_series_maps_and_bad_settings_are_named() {
 #[test]
 fn a_flat_window_is_withheld_or_reported_flat_as_the_limit_says() {
     let dir = tempfile::tempdir().unwrap();
-    let station = common::public_small().join("station.toml");
-    let acq = dir.path().join("acq");
-    let out = mfd(&[
-        "simulate",
-        "--station",
-        station.to_str().unwrap(),
-        "--noise",
-        "0.02",
-        "--out",
-        acq.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", common::output_text(&out));
+    let acq = simulate_with(dir.path(), &["--noise", "0.02"]);
     let run = |name: &str, extra: &[&str]| {
         let res = dir.path().join(name);
         let mut args = vec![
