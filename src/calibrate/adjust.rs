@@ -331,7 +331,7 @@ pub fn adjust(
         .sum();
     let taken = estimated.len() as f64 - prior_share;
     let weak = weak_directions(&covariance, &params[..estimated.len()]);
-    let bend = curvature(&problem, &out.params, &covariance);
+    let bend = curvature(&problem, &held, &out.params, &covariance);
     let covariance = covariance + bend;
     Ok(Adjusted {
         state: out.params,
