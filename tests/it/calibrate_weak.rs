@@ -100,7 +100,7 @@ fn close_layers_calibrate_and_name_the_weak_direction() {
     //   camera's pointing the session pins a combination to ~1e-7 rad, and
     //   the truth lay 5–20 of those σ off it on half the seeds until
     //   `calibrate::valley` took the second-order bend of pairs of long
-    //   directions and of the held parameters' draws (measured 10.7–40.7).
+    //   directions and of the held parameters' draws (measured 10.7–40.6).
     let truth = narrow_truth();
     let seeds = 12;
     let mut weak_named = 0;
@@ -316,7 +316,7 @@ fn the_weak_directions_sigma_matches_its_scatter() {
     //
     // The same seeds carry issue 35's line for the whole error vector: χ²
     // (k = 30) at p ≥ 0.001 in every seed, and its mean k ± 4 √(2k/N) =
-    // 30 ± 4.9. Measured 14.5–50.8, mean 28.6; with each long direction's
+    // 30 ± 4.9. Measured: mean 28.7, worst 53.3; with each long direction's
     // own bend only (`3 q qᵀ`), 19 of 40 seeds failed (median χ² 50.3).
     let truth = narrow_truth();
     let seeds = 100..140;
