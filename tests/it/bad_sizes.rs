@@ -147,7 +147,8 @@ fn tau_beyond_the_screen_is_refused_by_plan_and_budget_as_by_simulate() {
         3,
         &[why],
     );
-    let sched = out_file("beyond.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let sched = dir.path().join("beyond.toml");
     std::fs::write(
         &sched,
         "format = \"mfd-schedule/1\"\n[[frame]]\ndirection_deg = 45.0\ntau = 5000.0\n",

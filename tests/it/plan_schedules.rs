@@ -10,9 +10,7 @@ use mfd::acquire::schedule_file;
 use mfd::optics::station::bench_station;
 use mfd::plan::{self, Budget, DesignOptions, PlanOptions};
 
-fn temp(name: &str, text: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("mfd-plan-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+fn temp(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
     p
@@ -28,8 +26,9 @@ fn reader_rejects_what_the_spec_does_not_allow_naming_file_and_field() {
         ("empty.toml", "format = \"mfd-schedule/1\"\nframe = []\n", "frame"),
         ("nan.toml", "format = \"mfd-schedule/1\"\n[[frame]]\ndirection_deg = nan\ntau = 1.0\n", "frame[0].direction_deg"),
     ];
+    let dir = tempfile::tempdir().unwrap();
     for (name, text, field) in cases {
-        let p = temp(name, text);
+        let p = temp(dir.path(), name, text);
         let err = schedule_file::load(&p).unwrap_err().to_string();
         assert!(err.contains(name) && err.contains(field), "{name}: {err}");
         // The budget's reader gives the same errors.
