@@ -91,12 +91,14 @@ impl BlockIngest<'_> {
     /// Adds the block's samples of pixel `p` to its state `st`, setting
     /// aside (into `out`) the ones that may be clipped while the pixel's
     /// `count` and the acquisition's budget allow, else giving it up.
+    #[allow(clippy::too_many_arguments)]
     fn pixel(
         &self,
         p: usize,
         st: &mut [f64],
+        z: &mut [f32],
         count: &mut u32,
-        items: &mut Vec<(f64, usize)>,
+        (items, acc): (&mut Vec<(f64, usize)>, &mut Vec<f64>),
         out: &mut Vec<SetAside>,
     ) {
         let s = self.statistics;
@@ -111,7 +113,7 @@ impl BlockIngest<'_> {
         for &(r0, r1, d) in &self.weights.runs {
             let q = s.tables.dirs[d].data.len();
             let g = s.grid[p * nd + d] as usize;
-            let o = s.offsets[d];
+            let (o, zo) = (s.offsets[d], s.z_offsets[d]);
             items.clear();
             let (mut s1, mut s2) = (0.0, 0.0);
             for r in r0..r1 {
@@ -137,10 +139,16 @@ impl BlockIngest<'_> {
                 s2 += c * c;
                 items.push((y, self.weights.row_start[r] + 2 * g * q));
             }
-            accumulate(&mut st[o..o + 2 * q], items, &self.weights.w, self.avx2);
-            st[o + 2 * q] += s1;
-            st[o + 2 * q + 1] += s2;
-            st[o + 2 * q + 2] += items.len() as f64;
+            // The block's sums in double precision, rounded once into Z.
+            acc.clear();
+            acc.resize(2 * q, 0.0);
+            accumulate(acc, items, &self.weights.w, self.avx2);
+            for (zk, &a) in z[zo..zo + 2 * q].iter_mut().zip(acc.iter()) {
+                *zk = (f64::from(*zk) + a) as f32;
+            }
+            st[o] += s1;
+            st[o + 1] += s2;
+            st[o + 2] += items.len() as f64;
         }
     }
 }
@@ -153,11 +161,12 @@ impl Statistics {
         if pixels == 0 || rows == 0 {
             return;
         }
-        let stride = self.stride;
+        let (stride, z_stride) = (self.stride, self.z_stride);
         let chunk = 256;
-        // The state and counts are written chunk by chunk while the rest
-        // of `self` is read: taken out for the pass, put back after.
+        // The state, Z and counts are written chunk by chunk while the
+        // rest of `self` is read: taken out for the pass, put back after.
         let mut state = std::mem::take(&mut self.state);
+        let mut z = std::mem::take(&mut self.z);
         let mut counts = std::mem::take(&mut self.counts);
         let ingest = BlockIngest {
             weights: BlockWeights::new(&self.tables, first, rows),
@@ -170,20 +179,27 @@ impl Statistics {
         };
         let aside: Vec<Vec<SetAside>> = state
             .par_chunks_mut(chunk * stride)
+            .zip(z.par_chunks_mut(chunk * z_stride))
             .zip(counts.par_chunks_mut(chunk))
             .enumerate()
-            .map(|(ci, (state, counts))| {
+            .map(|(ci, ((state, z), counts))| {
                 let mut out = Vec::new();
                 let mut items: Vec<(f64, usize)> = Vec::with_capacity(rows);
-                for (k, (st, count)) in state.chunks_mut(stride).zip(counts.iter_mut()).enumerate()
-                {
-                    ingest.pixel(ci * chunk + k, st, count, &mut items, &mut out);
+                let mut acc: Vec<f64> = Vec::new();
+                let pixels = state
+                    .chunks_mut(stride)
+                    .zip(z.chunks_mut(z_stride))
+                    .zip(counts.iter_mut());
+                for (k, ((st, z), count)) in pixels.enumerate() {
+                    let scratch = (&mut items, &mut acc);
+                    ingest.pixel(ci * chunk + k, st, z, count, scratch, &mut out);
                 }
                 out
             })
             .collect();
         drop(ingest);
         self.state = state;
+        self.z = z;
         self.counts = counts;
         for a in aside {
             self.set_aside.extend(a);

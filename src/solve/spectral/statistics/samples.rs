@@ -53,9 +53,10 @@ impl Statistics {
             return None;
         }
         let st = &self.state[p * self.stride..(p + 1) * self.stride];
+        let z = &self.z[p * self.z_stride..(p + 1) * self.z_stride];
         let y0 = st[0];
         let mut dirs: Vec<PixelDir> = (0..self.tables.dirs.len())
-            .map(|d| self.pixel_dir(p, d, st))
+            .map(|d| self.pixel_dir(p, d, (st, z)))
             .collect();
         let from = self.set_aside.partition_point(|s| (s.pixel as usize) < p);
         let to = self.set_aside.partition_point(|s| (s.pixel as usize) <= p);
@@ -92,23 +93,23 @@ impl Statistics {
         ))
     }
 
-    /// Direction `d` of pixel `p`, whose state is `st`: its Z (spare
+    /// Direction `d` of pixel `p`, whose sums are `st` and Z `zs`: its Z (spare
     /// arrays, the lifted ones zeroed) and its grid point's schedule sums,
     /// borrowed.
-    fn pixel_dir<'a>(&'a self, p: usize, d: usize, st: &[f64]) -> PixelDir<'a> {
+    fn pixel_dir<'a>(&'a self, p: usize, d: usize, (st, zs): (&[f64], &[f32])) -> PixelDir<'a> {
         let t = &self.tables.dirs[d];
         let nd = self.tables.dirs.len();
         let q = t.data.len();
         let qg = t.gram.len();
-        let o = self.offsets[d];
+        let (o, zo) = (self.offsets[d], self.z_offsets[d]);
         let g = self.grid[p * nd + d] as usize;
         let gram = g * qg..(g + 1) * qg;
         let (mut z, mut zg_re, mut zg_im) = spare();
         z.clear();
         z.extend(
-            st[o..o + 2 * q]
+            zs[zo..zo + 2 * q]
                 .chunks_exact(2)
-                .map(|c| C64::new(c[0], c[1])),
+                .map(|c| C64::new(f64::from(c[0]), f64::from(c[1]))),
         );
         for v in [&mut zg_re, &mut zg_im] {
             v.clear();
@@ -125,9 +126,9 @@ impl Statistics {
             zg_re,
             zg_im,
             ez_data: Cow::Borrowed(&t.ez_data[g * q..(g + 1) * q]),
-            sy: st[o + 2 * q],
-            syy: st[o + 2 * q + 1],
-            n: st[o + 2 * q + 2],
+            sy: st[o],
+            syy: st[o + 1],
+            n: st[o + 2],
         }
     }
 
