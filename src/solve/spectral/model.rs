@@ -34,7 +34,7 @@ mod samples;
 
 pub use design::{Axis, Design, Falloff, FrameMeta};
 pub(crate) use fit::ParamCholesky;
-pub use fit::{gauss_newton_step, levenberg_marquardt, Fit, DAMPING};
+pub use fit::{gauss_newton_step, levenberg_marquardt, levenberg_marquardt_at, Fit, DAMPING};
 pub use repeats::{RepeatSamples, Repeats};
 pub use samples::{envelope, linear_amplitudes, linear_amplitudes_in, Samples, SeriesSamples};
 

@@ -155,30 +155,18 @@ impl<S: Samples + ?Sized> LeastSquares for PixelProblem<'_, S> {
 /// fit and the evaluation that would only confirm it is saved (one of the
 /// 3–6 per fit). `iterations` counts the evaluated steps.
 pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_iter: usize) -> Fit {
-    let problem = PixelProblem {
-        data,
-        k: start.k,
-        dof: dof(data.count(), &start),
-    };
-    let at_start = data.normal(&start);
-    let Ok(out) = lm::minimise(&problem, start, at_start, &DAMPING, max_iter);
-    Fit {
-        params: out.params,
-        rss: out.normal.rss,
-        jtj: out.normal.jtj,
-        iterations: out.trials,
-        converged: out.stop.converged(),
-    }
+    levenberg_marquardt_at(data, start, data.normal(&start), max_iter)
 }
 
 /// One Gauss–Newton step from `start`, evaluated: the fit after it, the
 /// next step from there and the decrease the linearisation predicts for it
-/// (`Jᵀr · (JᵀJ)⁻¹Jᵀr`). `None` when the step raises the RSS or JᵀJ is
-/// singular.
+/// (`Jᵀr · (JᵀJ)⁻¹Jᵀr`), and the normal equations after it (from which
+/// [`levenberg_marquardt_at`] goes on). `None` when the step raises the
+/// RSS or JᵀJ is singular.
 pub fn gauss_newton_step<S: Samples + ?Sized>(
     data: &S,
     start: Params,
-) -> Option<(Fit, DVector<f64>, f64)> {
+) -> Option<(Fit, DVector<f64>, f64, Normal)> {
     let ne = data.normal(&start);
     if !ne.rss.is_finite() {
         return None;
@@ -196,11 +184,36 @@ pub fn gauss_newton_step<S: Samples + ?Sized>(
         Fit {
             params: p,
             rss: at.rss,
-            jtj: at.jtj,
+            jtj: at.jtj.clone(),
             iterations: 1,
             converged,
         },
         next,
         remaining,
+        at,
     ))
+}
+
+/// [`levenberg_marquardt`] from `start` whose normal equations `at_start`
+/// are already evaluated (the end of a [`gauss_newton_step`]): the
+/// evaluation is not repeated.
+pub fn levenberg_marquardt_at<S: Samples + ?Sized>(
+    data: &S,
+    start: Params,
+    at_start: Normal,
+    max_iter: usize,
+) -> Fit {
+    let problem = PixelProblem {
+        data,
+        k: start.k,
+        dof: dof(data.count(), &start),
+    };
+    let Ok(out) = lm::minimise(&problem, start, at_start, &DAMPING, max_iter);
+    Fit {
+        params: out.params,
+        rss: out.normal.rss,
+        jtj: out.normal.jtj,
+        iterations: out.trials,
+        converged: out.stop.converged(),
+    }
 }
