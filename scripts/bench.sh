@@ -23,7 +23,7 @@ benches=(
   "render --station calib/bench-fill.toml"
   "render --station calib/paper-sim.toml"
   # The scene: the element fills the 1296×966 sensor, 2000 frames
-  # (about 3 minutes and 3.7 GiB with the statistics engine).
+  # (about 3 minutes and 2 GiB with the statistics engine).
   "spectral --station calib/bench-fill.toml --pixels 0 --engine statistics"
   # The same centre of 20 000 pixels with each engine.
   "spectral --station calib/bench-fill.toml --pixels 20000 --engine series"

@@ -302,10 +302,12 @@ fn print_summary(p: &Prediction) {
         "true points found".to_string()
     };
     println!(
-        "spectral stage ({} engine) on {} sample pixels at this noise: {detected} on {:.0} %",
+        "spectral stage ({} engine) on {} sample pixels at this noise: {detected} on {:.0} % \
+         searched, {:.0} % along camera rows (each pixel started from its neighbour's fit)",
         st.engine,
         st.pixels,
-        100.0 * st.found_fraction
+        100.0 * st.found_fraction,
+        100.0 * st.found_fraction_in_rows
     );
     if p.bound == mfd::plan::BoundKind::SurfaceDomain {
         let c = &p.convergence;

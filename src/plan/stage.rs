@@ -18,8 +18,6 @@
 //! stage (it forbade designs the stage measures) or looser (a 200-frame
 //! design it passed measured nothing, the detection failing in noise).
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
@@ -30,7 +28,7 @@ use crate::solve::spectral::model::{
     Design, Falloff, Params, RepeatSamples, Repeats, Samples, MAX_REFLECTIONS,
 };
 use crate::solve::spectral::periodogram::SpectrumPlans;
-use crate::solve::spectral::pixel::{fit_samples_seeded, PixelContext, PixelFits};
+use crate::solve::spectral::pixel::{fit_samples_seeded, PixelContext, PixelFits, Seed};
 use crate::solve::spectral::statistics::{Statistics, STATS_BLOCK};
 use crate::solve::spectral::{Engine, SpectralConfig, SERIES_LIMIT_BYTES};
 
@@ -59,6 +57,14 @@ pub struct StageCheck {
     /// Fraction of them whose fit found every present reflection at its
     /// true point (within [`FOUND_SIGMAS`] of its reported σ).
     pub found_fraction: f64,
+    /// The fraction the stage reaches along camera rows, where each pixel
+    /// starts from its left neighbour's fit and is searched where that
+    /// fails: `s / (1 − w + s)`, the steady state of a row, with `s` the
+    /// searched [`Self::found_fraction`] and `w` the fraction found among
+    /// the right neighbours of found sample pixels, each started from its
+    /// neighbour's fit. The measurability rule keeps to the searched
+    /// fraction (the rows' start and a row after a loss are searched).
+    pub found_fraction_in_rows: f64,
     /// Fraction whose periodogram detected no signal in some direction.
     pub no_signal_fraction: f64,
     /// At least [`STAGE_FRACTION`] found.
@@ -268,10 +274,18 @@ struct Judge<'a> {
     max_iter: usize,
 }
 
+/// One sample pixel's fit as the stage check counts it.
+struct Judged {
+    found: bool,
+    no_signal: bool,
+    /// What the fit hands its right neighbour (a pair found and reported).
+    seed: Option<Seed>,
+}
+
 impl Judge<'_> {
-    /// Pixel `q`'s fit on `data` (`excluded` samples clipped): (found,
-    /// no signal), as counts.
-    fn fit<S: Samples>(&self, q: usize, data: &S, excluded: usize) -> (usize, usize) {
+    /// Pixel `q`'s fit on `data` (`excluded` samples clipped), started
+    /// from `seed` where given.
+    fn fit<S: Samples>(&self, q: usize, data: &S, excluded: usize, seed: Option<&Seed>) -> Judged {
         let ctx = PixelContext {
             design: self.design,
             plans: &self.plans,
@@ -282,19 +296,19 @@ impl Judge<'_> {
             max_iter: self.max_iter,
         };
         let mut fits = PixelFits::none();
-        fit_samples_seeded(&ctx, data, excluded, None, &mut fits);
-        (
-            usize::from(found(&fits, &self.truth.pixels[q], self.two)),
-            usize::from(
-                fits.flags
-                    .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
-            ),
-        )
+        let next = fit_samples_seeded(&ctx, data, excluded, seed, &mut fits);
+        Judged {
+            found: found(&fits, &self.truth.pixels[q], self.two),
+            no_signal: fits
+                .flags
+                .contains(crate::solve::spectral::PixelFlags::NO_SIGNAL),
+            seed: next,
+        }
     }
 
     /// Pixel `q`'s fit on its series `raw`, summed over the repeated
     /// frames (the same least squares at a cost in distinct frames).
-    fn fit_series(&self, q: usize, raw: &[u16]) -> (usize, usize) {
+    fn fit_series(&self, q: usize, raw: &[u16], seed: Option<&Seed>) -> Judged {
         let y: Vec<f64> = raw
             .iter()
             .map(|&v| {
@@ -307,7 +321,46 @@ impl Judge<'_> {
             .collect();
         let excluded = y.iter().filter(|v| v.is_nan()).count();
         let data = RepeatSamples::new(self.design, &self.plans, &self.repeats, &y, self.falloff0);
-        self.fit(q, &data, excluded)
+        self.fit(q, &data, excluded, seed)
+    }
+
+    /// Every pixel of `pixels` fitted on its series `ys[i]`, started from
+    /// `seeds[i]` where given, on every core: with the statistics engine
+    /// on their statistics, else on the series.
+    fn fit_all(
+        &self,
+        pixels: &[usize],
+        ys: &[Vec<u16>],
+        seeds: &[Option<Seed>],
+        statistics: Option<(&SpectralConfig, f64)>,
+    ) -> Vec<Judged> {
+        let blank = || Judged {
+            found: false,
+            no_signal: false,
+            seed: None,
+        };
+        let Some((config, kappa0)) = statistics else {
+            return (0..pixels.len())
+                .into_par_iter()
+                .map(|i| self.fit_series(pixels[i], &ys[i], seeds[i].as_ref()))
+                .collect();
+        };
+        let design = self.design;
+        let stats = statistics_of(design, self.prior, pixels, config, &self.plans, kappa0, ys);
+        (0..pixels.len())
+            .into_par_iter()
+            .map(|i| {
+                match stats
+                    .as_ref()
+                    .and_then(|s| s.samples(design, i, Some(self.sat)))
+                {
+                    Some((data, excluded)) => {
+                        self.fit(pixels[i], &data, excluded, seeds[i].as_ref())
+                    }
+                    None => blank(),
+                }
+            })
+            .collect()
     }
 }
 
@@ -357,48 +410,42 @@ pub fn stage_check(
         )
     };
     let statistics = uses_statistics(prior, design.frames.len(), config);
-    let (ok, silent) = if statistics {
-        let ys: Vec<Vec<u16>> = pixels.iter().map(|&q| draw(q)).collect();
-        let stats = statistics_of(design, prior, pixels, config, &judge.plans, kappa0, &ys);
-        // Each pixel's fit on its own statistics: independent, so on
-        // every core; the counts are sums.
-        pixels
-            .par_iter()
-            .enumerate()
-            .map(|(i, &q)| {
-                match stats
-                    .as_ref()
-                    .and_then(|s| s.samples(design, i, Some(judge.sat)))
-                {
-                    Some((data, excluded)) => judge.fit(q, &data, excluded),
-                    None => (0, 0),
-                }
-            })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
-    } else {
-        // Each pixel's series is fitted on the pool as soon as it is
-        // drawn, while the next is drawn: the draws stay in order, the
-        // fits are independent and the counts sums.
-        let (ok, silent) = (AtomicUsize::new(0), AtomicUsize::new(0));
-        rayon::scope(|s| {
-            for &q in pixels {
-                let raw = draw(q);
-                let (ok, silent, judge) = (&ok, &silent, &judge);
-                s.spawn(move |_| {
-                    let (a, b) = judge.fit_series(q, &raw);
-                    ok.fetch_add(a, Ordering::Relaxed);
-                    silent.fetch_add(b, Ordering::Relaxed);
-                });
-            }
-        });
-        (ok.into_inner(), silent.into_inner())
-    };
+    let engine = statistics.then_some((config, kappa0));
+    // The sample pixels' draws first, in order, then their neighbours'.
+    let ys: Vec<Vec<u16>> = pixels.iter().map(|&q| draw(q)).collect();
+    let fits = judge.fit_all(pixels, &ys, &vec![None; pixels.len()], engine);
+    let ok = fits.iter().filter(|f| f.found).count();
+    let silent = fits.iter().filter(|f| f.no_signal).count();
+    // Each found sample pixel's right neighbour in its camera row, started
+    // from its fit as the stage's row does.
+    let width = prior.width;
+    let (next, seeds): (Vec<usize>, Vec<Option<Seed>>) = pixels
+        .iter()
+        .zip(&fits)
+        .filter(|(&q, f)| {
+            f.found
+                && f.seed.is_some()
+                && (q + 1) % width != 0
+                && prior.pixels.get(q + 1).is_some_and(|p| p.front.is_ok())
+        })
+        .map(|(&q, f)| (q + 1, f.seed))
+        .unzip();
+    let ys: Vec<Vec<u16>> = next.iter().map(|&q| draw(q)).collect();
+    let warm = judge.fit_all(&next, &ys, &seeds, engine);
     let n = pixels.len().max(1) as f64;
-    let found_fraction = ok as f64 / n;
+    let s = ok as f64 / n;
+    let found_fraction_in_rows = if next.is_empty() || s == 0.0 {
+        s
+    } else {
+        let w = warm.iter().filter(|f| f.found).count() as f64 / next.len() as f64;
+        s / (1.0 - w + s)
+    };
+    let found_fraction = s;
     StageCheck {
         engine: if statistics { "statistics" } else { "series" },
         pixels: pixels.len(),
         found_fraction,
+        found_fraction_in_rows,
         no_signal_fraction: silent as f64 / n,
         measurable: !pixels.is_empty() && found_fraction >= STAGE_FRACTION,
     }
