@@ -301,13 +301,18 @@ fn print_summary(p: &Prediction) {
     } else {
         "true points found".to_string()
     };
+    let rows = st.found_fraction_in_rows.map_or(String::new(), |f| {
+        format!(
+            ", {:.0} % along camera rows (each pixel started from its neighbour's fit)",
+            100.0 * f
+        )
+    });
     println!(
         "spectral stage ({} engine) on {} sample pixels at this noise: {detected} on {:.0} % \
-         searched, {:.0} % along camera rows (each pixel started from its neighbour's fit)",
+         searched{rows}",
         st.engine,
         st.pixels,
         100.0 * st.found_fraction,
-        100.0 * st.found_fraction_in_rows
     );
     if p.bound == mfd::plan::BoundKind::SurfaceDomain {
         let c = &p.convergence;

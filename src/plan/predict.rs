@@ -163,7 +163,7 @@ pub fn predict(
     let separation = separation(&design, &view, &both, gain, opts);
     let bent = ambiguity::expected_view(station, opts)?;
     let spread = ambiguity::spread_between(&view, &bent, opts);
-    let stage = run_stage(station, &design, &view, &bent, STAGE_PIXELS, opts)?;
+    let stage = run_stage(station, &design, &view, &bent, STAGE_PIXELS, opts, true)?;
     let (bound, separation_bins) = bound_kind(&design, &view, opts);
     let kappa = opts.radiometry.tau_max.powi(-2);
     let both_sample = sample_pixels(&view, CONVERGENCE_PIXELS, true);

@@ -64,7 +64,9 @@ pub struct StageCheck {
     /// the right neighbours of found sample pixels, each started from its
     /// neighbour's fit. The measurability rule keeps to the searched
     /// fraction (the rows' start and a row after a loss are searched).
-    pub found_fraction_in_rows: f64,
+    /// `None` where not asked for (the design's candidates: it would
+    /// double their fits for a figure nothing decides on).
+    pub found_fraction_in_rows: Option<f64>,
     /// Fraction whose periodogram detected no signal in some direction.
     pub no_signal_fraction: f64,
     /// At least [`STAGE_FRACTION`] found.
@@ -366,7 +368,9 @@ impl Judge<'_> {
 
 /// Runs the stage on `pixels` of `prior` (the station's flat-plate
 /// prediction, as the stage holds it) with their true points from `truth`
-/// (the expected surfaces), one noise draw each from `seed`.
+/// (the expected surfaces), one noise draw each from `seed`; with `rows`,
+/// also on the found pixels' right neighbours
+/// ([`StageCheck::found_fraction_in_rows`]).
 pub fn stage_check(
     design: &Design,
     prior: &TracedView,
@@ -375,6 +379,7 @@ pub fn stage_check(
     gain: f64,
     opts: &PlanOptions,
     seed: u64,
+    rows: bool,
 ) -> StageCheck {
     let config = &opts.spectral;
     let kappa0 = config
@@ -419,27 +424,29 @@ pub fn stage_check(
     // Each found sample pixel's right neighbour in its camera row, started
     // from its fit as the stage's row does.
     let width = prior.width;
-    let (next, seeds): (Vec<usize>, Vec<Option<Seed>>) = pixels
-        .iter()
-        .zip(&fits)
-        .filter(|(&q, f)| {
-            f.found
-                && f.seed.is_some()
-                && (q + 1) % width != 0
-                && prior.pixels.get(q + 1).is_some_and(|p| p.front.is_ok())
-        })
-        .map(|(&q, f)| (q + 1, f.seed))
-        .unzip();
-    let ys: Vec<Vec<u16>> = next.iter().map(|&q| draw(q)).collect();
-    let warm = judge.fit_all(&next, &ys, &seeds, engine);
     let n = pixels.len().max(1) as f64;
     let s = ok as f64 / n;
-    let found_fraction_in_rows = if next.is_empty() || s == 0.0 {
-        s
-    } else {
-        let w = warm.iter().filter(|f| f.found).count() as f64 / next.len() as f64;
-        s / (1.0 - w + s)
-    };
+    let found_fraction_in_rows = rows.then(|| {
+        let (next, seeds): (Vec<usize>, Vec<Option<Seed>>) = pixels
+            .iter()
+            .zip(&fits)
+            .filter(|(&q, f)| {
+                f.found
+                    && f.seed.is_some()
+                    && (q + 1) % width != 0
+                    && prior.pixels.get(q + 1).is_some_and(|p| p.front.is_ok())
+            })
+            .map(|(&q, f)| (q + 1, f.seed))
+            .unzip();
+        let ys: Vec<Vec<u16>> = next.iter().map(|&q| draw(q)).collect();
+        let warm = judge.fit_all(&next, &ys, &seeds, engine);
+        if next.is_empty() || s == 0.0 {
+            s
+        } else {
+            let w = warm.iter().filter(|f| f.found).count() as f64 / next.len() as f64;
+            s / (1.0 - w + s)
+        }
+    });
     let found_fraction = s;
     StageCheck {
         engine: if statistics { "statistics" } else { "series" },

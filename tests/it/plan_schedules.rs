@@ -273,7 +273,11 @@ fn the_planner_says_what_the_stage_will_measure() {
     for n in [200, 600] {
         let d = plan::design(&station, Budget::Frames(n), &DesignOptions::default()).unwrap();
         let a = run_pipeline(&d.frames, 31, mfd::solve::spectral::Engine::Series);
-        let p = d.prediction.stage.found_fraction_in_rows;
+        let p = d
+            .prediction
+            .stage
+            .found_fraction_in_rows
+            .expect("the prediction runs the stage along rows");
         let searched = d.prediction.stage.found_fraction;
         eprintln!(
             "{n} designed frames: planner found {p:.3} in rows, {searched:.3} searched (measurable {}), stage found {:.3}, errors {:?}, predicted {} / {:?}",

@@ -50,6 +50,7 @@ fn admissible(
         &views.bent,
         super::super::predict::STAGE_PIXELS,
         &opts.plan,
+        false,
     )?;
     if bound_kind(&design, &views.flat, &opts.plan).0 == BoundKind::SurfaceDomain {
         return Ok(surface_domain_admissible(

@@ -73,9 +73,9 @@ pub fn stage_pixels(flat: &TracedView, bent: &TracedView, n: usize, both: bool) 
 }
 
 /// The stage run on `n` sample pixels of `frames`' design (see
-/// [`stage::stage_check`]): the prior is the station's flat plate with
-/// both paths (what the stage holds, AR-coated or not), the truth the
-/// expected plate.
+/// [`stage::stage_check`]; with `rows`, also what it finds along camera
+/// rows): the prior is the station's flat plate with both paths (what
+/// the stage holds, AR-coated or not), the truth the expected plate.
 pub fn run_stage(
     station: &Station,
     design: &Design,
@@ -83,6 +83,7 @@ pub fn run_stage(
     bent: &TracedView,
     n: usize,
     opts: &PlanOptions,
+    rows: bool,
 ) -> Result<StageCheck, PlanError> {
     let full;
     let prior = if opts.back_scale == 1.0 {
@@ -95,6 +96,6 @@ pub fn run_stage(
     let pixels = stage_pixels(view, bent, n, both);
     let gain = opts.radiometry.gain(view);
     Ok(stage::stage_check(
-        design, prior, bent, &pixels, gain, opts, STAGE_SEED,
+        design, prior, bent, &pixels, gain, opts, STAGE_SEED, rows,
     ))
 }
