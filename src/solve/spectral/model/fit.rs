@@ -160,13 +160,13 @@ pub fn levenberg_marquardt<S: Samples + ?Sized>(data: &S, start: Params, max_ite
 
 /// One Gauss–Newton step from `start`, evaluated: the fit after it, the
 /// next step from there and the decrease the linearisation predicts for it
-/// (`Jᵀr · (JᵀJ)⁻¹Jᵀr`), and the normal equations after it (from which
-/// [`levenberg_marquardt_at`] goes on). `None` when the step raises the
-/// RSS or JᵀJ is singular.
+/// (`Jᵀr · (JᵀJ)⁻¹Jᵀr`), and Jᵀr after it (with the fit's RSS and JᵀJ,
+/// the normal equations from which [`levenberg_marquardt_at`] goes on).
+/// `None` when the step raises the RSS or JᵀJ is singular.
 pub fn gauss_newton_step<S: Samples + ?Sized>(
     data: &S,
     start: Params,
-) -> Option<(Fit, DVector<f64>, f64, Normal)> {
+) -> Option<(Fit, DVector<f64>, f64, DVector<f64>)> {
     let ne = data.normal(&start);
     if !ne.rss.is_finite() {
         return None;
@@ -184,13 +184,13 @@ pub fn gauss_newton_step<S: Samples + ?Sized>(
         Fit {
             params: p,
             rss: at.rss,
-            jtj: at.jtj.clone(),
+            jtj: at.jtj,
             iterations: 1,
             converged,
         },
         next,
         remaining,
-        at,
+        at.jtr,
     ))
 }
 

@@ -4,7 +4,7 @@
 
 use super::{candidate, Candidate, PixelContext};
 use crate::solve::spectral::model::{
-    gauss_newton_step, levenberg_marquardt_at, Fit, Params, Samples,
+    gauss_newton_step, levenberg_marquardt_at, Fit, Normal, Params, Samples,
 };
 use crate::solve::spectral::PixelResult;
 
@@ -125,7 +125,7 @@ pub(super) fn warm_fits<S: Samples + ?Sized>(
         two.uv[1][c] += [b.u, b.v][c] - seed.back[c];
     }
     let n = data.count();
-    let (fit, next, remaining, at) = gauss_newton_step(data, two)?;
+    let (fit, next, remaining, jtr) = gauss_newton_step(data, two)?;
     let sigma2 = fit.sigma2(n);
     let two = if fit.converged {
         fit
@@ -138,6 +138,11 @@ pub(super) fn warm_fits<S: Samples + ?Sized>(
             ..fit
         }
     } else {
+        let at = Normal {
+            rss: fit.rss,
+            jtj: fit.jtj,
+            jtr,
+        };
         let fit = levenberg_marquardt_at(data, fit.params, at, ctx.max_iter);
         if !fit.converged {
             return None;
