@@ -74,8 +74,8 @@ pub(super) const UNIT_SD_REUSE: u32 = 32;
 pub(super) const WARM_NOISE_RATIO: f64 = 1.2;
 
 /// A warm pixel's amplitudes and falloff κ must lie within this fraction of
-/// its neighbour's (κ may instead lie within [`WARM_KAPPA_SIGMAS`]): they follow the illumination and the optics, smooth
-/// across one camera pixel, and a 10σ amplitude carries ≤ 10 % of noise
+/// its neighbour's (κ may instead lie within [`WARM_KAPPA_SIGMAS`]): they
+/// follow the illumination and the optics, smooth across one camera pixel, and a 10σ amplitude carries ≤ 10 % of noise
 /// (typically ~1 %). Where they jump, the data do not follow the smooth
 /// scene the warm start assumes, and the pixel is searched.
 const WARM_CHANGE: f64 = 0.2;

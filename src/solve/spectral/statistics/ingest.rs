@@ -88,10 +88,10 @@ impl BlockIngest<'_> {
         v == 0 || FULL_SCALES.contains(&v) || configured.is_some_and(|s| v >= s)
     }
 
-    /// Adds the block's samples of pixel `p` to its state `st`, setting
-    /// aside (into `out`) the ones that may be clipped while the pixel's
-    /// `count` and the acquisition's budget allow, else giving it up.
-    #[allow(clippy::too_many_arguments)]
+    /// Adds the block's samples of pixel `p` to its sums `st` and its Z
+    /// `z` (through the scratch `items`, `acc`), setting aside (into `out`)
+    /// the ones that may be clipped while the pixel's `count` and the
+    /// acquisition's budget allow, else giving it up.
     fn pixel(
         &self,
         p: usize,
