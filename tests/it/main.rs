@@ -70,6 +70,7 @@ mod simulate;
 mod spectral_engines;
 mod spectral_fixture;
 mod spectral_sim;
+mod spectral_soak;
 mod station_files;
 mod station_uncertainty;
 mod station_v2;

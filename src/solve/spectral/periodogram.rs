@@ -38,6 +38,8 @@ enum Plan {
         slot: Vec<u32>,
         mu_count: usize,
         step: f64,
+        /// The grid's τ step Δ.
+        dtau: f64,
     },
     /// Any other τ set: a direct DFT on a grid of μ.
     Direct { taus: Vec<f64>, mu_grid: Vec<f64> },
@@ -80,11 +82,60 @@ fn grid_slots(taus: &[f64]) -> Option<Vec<u32>> {
     })
 }
 
+/// One direction's periodogram: the frames it takes (τ ascending), their
+/// Hann window, `e^{−2πiφ}` of each frame's phase (or 1), and the plan.
+#[derive(Clone)]
+struct DirPlan {
+    idx: Vec<u32>,
+    window: Vec<f64>,
+    rot: Vec<Complex<f64>>,
+    plan: Plan,
+}
+
+/// A direction's frames for its periodogram, and whether each must be
+/// turned back by its phase. A fringe `B cos 2π(μτ + φ)` with one phase
+/// throughout has its periodogram peak at μ whatever φ is; with phases
+/// that vary, only the sum of `(y − ȳ) e^{−2πi(μτ + φ)}` adds up (its
+/// mirror term, `e^{−2πi(μτ + 2φ)}`, spreads over μ or cancels as the
+/// phases go round; with one phase it sits at −μ, outside the search).
+/// So: the frames of the most common phase where they are at least half
+/// of the direction's (and 8), as the plain periodogram; otherwise every
+/// frame, each turned back by its phase (a phase-dithered schedule, or
+/// one whose phases all differ, where one phase may hold a single frame).
+fn frames_of(design: &Design, d: usize) -> (Vec<u32>, bool) {
+    let all: Vec<u32> = (0..design.frames.len() as u32)
+        .filter(|&i| design.frames[i as usize].dir == d)
+        .collect();
+    let mut phases: Vec<f64> = all
+        .iter()
+        .map(|&i| design.frames[i as usize].phase_cycles)
+        .collect();
+    phases.sort_by(f64::total_cmp);
+    let mut best = (0usize, 0.0);
+    let mut k = 0;
+    while k < phases.len() {
+        let run = phases[k..].iter().take_while(|&&p| p == phases[k]).count();
+        if run > best.0 {
+            best = (run, phases[k]);
+        }
+        k += run;
+    }
+    if best.0 >= 8 && 2 * best.0 >= all.len() {
+        let one = all
+            .into_iter()
+            .filter(|&i| design.frames[i as usize].phase_cycles == best.1)
+            .collect();
+        (one, false)
+    } else {
+        (all, true)
+    }
+}
+
 /// Periodogram plans for every direction of a design.
 #[derive(Clone)]
 pub struct SpectrumPlans {
-    /// Per direction: frame indices (one phase, τ ascending), Hann window, plan.
-    dirs: Vec<(Vec<u32>, Vec<f64>, Plan)>,
+    /// Per direction: its frames, window, phases and plan.
+    dirs: Vec<DirPlan>,
     /// 1 / (τ span) per direction: one Fourier bin in μ.
     bin: Vec<f64>,
 }
@@ -99,7 +150,8 @@ impl std::fmt::Debug for SpectrumPlans {
 
 impl SpectrumPlans {
     /// Plans for `design`: for each direction, the frames of its most
-    /// common phase sorted by τ.
+    /// common phase sorted by τ, or all of them turned back by their
+    /// phases ([`frames_of`]).
     pub fn new(design: &Design) -> Self {
         Self::with_fft(design, true)
     }
@@ -111,18 +163,27 @@ impl SpectrumPlans {
         let mut dirs = Vec::new();
         let mut bin = Vec::new();
         for d in 0..design.axes.len() {
-            let mut idx: Vec<u32> = (0..design.frames.len() as u32)
-                .filter(|&i| design.frames[i as usize].dir == d)
-                .collect();
-            let phase0 = idx
-                .first()
-                .map_or(0.0, |&i| design.frames[i as usize].phase_cycles);
-            idx.retain(|&i| design.frames[i as usize].phase_cycles == phase0);
+            let (mut idx, rotate) = frames_of(design, d);
             idx.sort_by(|&a, &b| {
                 design.frames[a as usize]
                     .tau
                     .total_cmp(&design.frames[b as usize].tau)
             });
+            // Each sample turned back by its own phase (1 where one phase
+            // is taken: the same values as without).
+            let rot: Vec<Complex<f64>> = idx
+                .iter()
+                .map(|&i| {
+                    if rotate {
+                        let (s, c) = (std::f64::consts::TAU
+                            * design.frames[i as usize].phase_cycles)
+                            .sin_cos();
+                        Complex::new(c, -s)
+                    } else {
+                        Complex::new(1.0, 0.0)
+                    }
+                })
+                .collect();
             let taus: Vec<f64> = idx.iter().map(|&i| design.frames[i as usize].tau).collect();
             let n = taus.len();
             let span = (taus.last().copied().unwrap_or(1.0) - taus.first().copied().unwrap_or(0.0))
@@ -155,12 +216,18 @@ impl SpectrumPlans {
                     slot,
                     mu_count,
                     step,
+                    dtau: span / slots.max(1) as f64,
                 }
             } else {
                 let mu_grid = (0..mu_count).map(|k| k as f64 * step).collect();
                 Plan::Direct { taus, mu_grid }
             };
-            dirs.push((idx, window, plan));
+            dirs.push(DirPlan {
+                idx,
+                window,
+                rot,
+                plan,
+            });
         }
         SpectrumPlans { dirs, bin }
     }
@@ -168,6 +235,17 @@ impl SpectrumPlans {
     /// One Fourier bin in μ for direction `d`.
     pub fn bin(&self, d: usize) -> f64 {
         self.bin[d]
+    }
+
+    /// The period in μ with which direction `d`'s periodogram repeats: `1/Δ`
+    /// for τ on a grid of step Δ (with or without gaps and repeats), where
+    /// a fringe at μ shows at `±μ + k/Δ` as strongly as at μ; `None` for τ
+    /// off any grid, whose near-repeats are weaker than the peak.
+    pub fn alias_period(&self, d: usize) -> Option<f64> {
+        match &self.dirs[d].plan {
+            Plan::Uniform { dtau, .. } | Plan::Grid { dtau, .. } => Some(1.0 / dtau),
+            Plan::Direct { .. } => None,
+        }
     }
 
     /// Strongest peak of direction `d`'s periodogram in `μ ∈ [3 bins, 1.05]`:
@@ -181,22 +259,33 @@ impl SpectrumPlans {
     /// Direction `d`'s periodogram of `y` (indexed by frame, NaN
     /// excluded): its μ grid and power; `None` with fewer than 8 samples.
     fn spectrum(&self, d: usize, y: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
-        let (idx, window, plan) = &self.dirs[d];
+        let DirPlan {
+            idx,
+            window,
+            rot,
+            plan,
+        } = &self.dirs[d];
         let vals: Vec<f64> = idx.iter().map(|&i| y[i as usize]).collect();
         let good: Vec<f64> = vals.iter().copied().filter(|v| v.is_finite()).collect();
         if good.len() < 8 {
             return None;
         }
         let mean = good.iter().sum::<f64>() / good.len() as f64;
-        let centred: Vec<f64> = vals
+        let centred: Vec<Complex<f64>> = vals
             .iter()
             .zip(window)
-            .map(|(v, w)| if v.is_finite() { (v - mean) * w } else { 0.0 })
+            .zip(rot)
+            .map(|((v, w), r)| {
+                if v.is_finite() {
+                    r * ((v - mean) * w)
+                } else {
+                    Complex::new(0.0, 0.0)
+                }
+            })
             .collect();
         let (mus, power) = match plan {
             Plan::Uniform { fft, n_fft, dtau } => {
-                let mut buf: Vec<Complex<f64>> =
-                    centred.iter().map(|&v| Complex::new(v, 0.0)).collect();
+                let mut buf = centred;
                 buf.resize(*n_fft, Complex::new(0.0, 0.0));
                 let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
                 fft.process_with_scratch(&mut buf, &mut scratch);
@@ -213,11 +302,12 @@ impl SpectrumPlans {
                 slot,
                 mu_count,
                 step,
+                ..
             } => {
                 let n_fft = fft.len();
                 let mut buf = vec![Complex::new(0.0, 0.0); n_fft];
                 for (&k, &v) in slot.iter().zip(&centred) {
-                    buf[k as usize].re += v;
+                    buf[k as usize] += v;
                 }
                 let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
                 fft.process_with_scratch(&mut buf, &mut scratch);
@@ -231,13 +321,12 @@ impl SpectrumPlans {
                 let p = mu_grid
                     .iter()
                     .map(|&mu| {
-                        let (mut re, mut im) = (0.0, 0.0);
+                        let mut sum = Complex::new(0.0, 0.0);
                         for (&t, &v) in taus.iter().zip(&centred) {
-                            let x = std::f64::consts::TAU * mu * t;
-                            re += v * x.cos();
-                            im -= v * x.sin();
+                            let (s, c) = (std::f64::consts::TAU * mu * t).sin_cos();
+                            sum += v * Complex::new(c, -s);
                         }
-                        re * re + im * im
+                        sum.norm_sqr()
                     })
                     .collect();
                 (mu_grid.clone(), p)

@@ -89,9 +89,12 @@ fn the_grid_fft_is_the_direct_dft_on_gapped_repeated_taus() {
     let direct = SpectrumPlans::with_fft(&design, false);
     let y = counts(&design);
     for d in 0..2 {
-        assert!(matches!(fft.dirs[d].2, Plan::Grid { .. }), "direction {d}");
         assert!(
-            matches!(direct.dirs[d].2, Plan::Direct { .. }),
+            matches!(fft.dirs[d].plan, Plan::Grid { .. }),
+            "direction {d}"
+        );
+        assert!(
+            matches!(direct.dirs[d].plan, Plan::Direct { .. }),
             "direction {d}"
         );
         let (mu_a, pa) = fft.spectrum(d, &y).unwrap();
@@ -136,5 +139,67 @@ fn taus_off_any_grid_take_the_direct_dft() {
     };
     let design = Design::new(frames, vec![axis], vec![0.0]);
     let plans = SpectrumPlans::new(&design);
-    assert!(matches!(plans.dirs[0].2, Plan::Direct { .. }));
+    assert!(matches!(plans.dirs[0].plan, Plan::Direct { .. }));
+}
+
+/// A phase-dithered schedule: every frame at its own phase (the most
+/// common one holds a single frame). Each sample is turned back by its
+/// phase: the grid FFT is still the direct DFT, and the peak is the
+/// fringe's (with one phase's frames alone there would be one sample).
+#[test]
+fn every_frame_at_its_own_phase_is_turned_back_by_it() {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let frames: Vec<FrameMeta> = (1..=300u32)
+        .filter(|k| !(120..150).contains(k))
+        .map(|k| FrameMeta {
+            tau: 0.5 * k as f64,
+            phase_cycles: uniform(),
+            dir: 0,
+        })
+        .collect();
+    let axis = Axis {
+        a: 1.0,
+        b: 0.0,
+        c: 0.0,
+        stretch: 1.0,
+    };
+    let design = Design::new(frames, vec![axis], vec![0.0]);
+    let fft = SpectrumPlans::with_fft(&design, true);
+    let direct = SpectrumPlans::with_fft(&design, false);
+    assert!(matches!(fft.dirs[0].plan, Plan::Grid { .. }));
+    assert_eq!(
+        fft.dirs[0].idx.len(),
+        design.frames.len(),
+        "every frame taken"
+    );
+    let y: Vec<f64> = design
+        .frames
+        .iter()
+        .map(|f| {
+            let x = std::f64::consts::TAU * (0.37 * f.tau + f.phase_cycles);
+            1000.0 + 400.0 * (-(f.tau / 150.0).powi(2)).exp() * x.cos() + 80.0 * (uniform() - 0.5)
+        })
+        .collect();
+    let (_, pa) = fft.spectrum(0, &y).unwrap();
+    let (_, pb) = direct.spectrum(0, &y).unwrap();
+    // As in the gapped test: 1e-9 of the largest power.
+    let top = pb.iter().copied().fold(0.0, f64::max);
+    for (a, b) in pa.iter().zip(&pb) {
+        assert!((a - b).abs() <= 1e-9 * top, "{a} vs {b}");
+    }
+    let (mu, ratio) = fft.peak(0, &y).unwrap();
+    assert!((mu - 0.37).abs() < 0.25 * fft.bin(0), "{mu}");
+    // The mirror term spreads over μ like noise of the fringe's own
+    // power: the peak still stands far above the median.
+    assert!(ratio > 100.0, "{ratio}");
+    assert!(
+        (fft.bin(0) - 1.0 / 149.5).abs() < 1e-12,
+        "the bin is the whole span's"
+    );
 }

@@ -312,6 +312,37 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
         .and_then(|two| next?.handed_on(&two.result, unit_sd))
 }
 
+/// Of the μ that direction `d`'s periodogram cannot tell from the peak at
+/// `mu` (`±mu + k/Δ` on a τ grid of step Δ:
+/// [`SpectrumPlans::alias_period`]), the one nearest the station's
+/// prediction for the pixel (its two points' midpoint). A direction whose
+/// τ step is coarse (Δ above ½: more than one alias within μ ∈ [0, 1.05])
+/// shows a fringe as strongly at its aliases as where it is, and the
+/// strongest of them is a matter of noise and the window; on a finer
+/// grid every alias lies beyond the search and `mu` is kept.
+fn nearest_alias(ctx: &PixelContext, d: usize, mu: f64) -> f64 {
+    let (Some(period), Ok(f)) = (ctx.plans.alias_period(d), ctx.prior.front) else {
+        return mu;
+    };
+    let ax = ctx.design.axes[d];
+    let predicted = match ctx.prior.back {
+        Ok(b) => 0.5 * (ax.s(f.u, f.v) + ax.s(b.u, b.v)),
+        Err(_) => ax.s(f.u, f.v),
+    };
+    if !(period.is_finite() && period > 0.0 && mu.is_finite()) {
+        return mu;
+    }
+    // The fringe coordinate runs over [0, 1] across the screen (the
+    // search's 1.05 beyond it): aliases outside are no screen point.
+    [mu, -mu]
+        .into_iter()
+        .map(|m| m + ((predicted - m) / period).round() * period)
+        .filter(|m| (0.0..=1.05).contains(m))
+        .chain([mu])
+        .min_by(|a, b| (a - predicted).abs().total_cmp(&(b - predicted).abs()))
+        .unwrap_or(mu)
+}
+
 /// The pixel's signal as one reflection: the one-reflection fit, or on a
 /// warm pixel the pair's amplitude-weighted centre and total amplitude.
 fn merged_signal(one: Option<&Candidate>, two: Option<&Candidate>) -> Params {
@@ -379,7 +410,7 @@ fn searched_fits<S: Samples + ?Sized>(
                 *base |= PixelFlags::OUT_OF_BAND;
                 return None;
             }
-            Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(mu),
+            Some((mu, ratio)) if ratio >= DETECTION_RATIO => mus.push(nearest_alias(ctx, d, mu)),
             _ => {
                 *base |= PixelFlags::NO_SIGNAL;
                 if data.band_limited() {
