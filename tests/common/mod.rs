@@ -13,6 +13,17 @@ pub fn public_small() -> PathBuf {
     repo("tests/fixtures/public-small")
 }
 
+/// A whole number from environment variable `name` (a soak test's
+/// count or seed), or `None` where it is not set; panics naming the
+/// variable where it is not a whole number.
+pub fn env_u64(name: &str) -> Option<u64> {
+    std::env::var(name).ok().map(|v| {
+        v.trim()
+            .parse()
+            .unwrap_or_else(|_| panic!("{name}={v}: expected a whole number"))
+    })
+}
+
 /// A file of the repository.
 pub fn repo(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)

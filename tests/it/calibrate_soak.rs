@@ -30,6 +30,8 @@ use draw::Draw;
 use gen::Session;
 use judge::{chi2_sf, judge, Ending, Judged, MIN_P};
 
+use crate::common::env_u64;
+
 /// Seeds of the default run start here (any fixed start will do; this one
 /// names the issue).
 const FIRST_SEED: u64 = 35_000;
@@ -55,14 +57,6 @@ fn covariance_failures(j: &Judged) -> &[String] {
         Ending::Ok { covariance, .. } => covariance,
         _ => &[],
     }
-}
-
-fn env_u64(name: &str) -> Option<u64> {
-    std::env::var(name).ok().map(|v| {
-        v.trim()
-            .parse()
-            .unwrap_or_else(|_| panic!("{name}={v}: expected a whole number"))
-    })
 }
 
 fn failures_path() -> PathBuf {

@@ -26,6 +26,7 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+use crate::common::env_u64;
 use crate::common::spectral::*;
 
 /// Seeds of the default run start here.
@@ -374,14 +375,6 @@ fn error_over_sigma(r: &Run) -> (f64, usize) {
     }
     let n = z2.len();
     ((z2.iter().sum::<f64>() / n.max(1) as f64).sqrt(), n)
-}
-
-fn env_u64(name: &str) -> Option<u64> {
-    std::env::var(name).ok().map(|v| {
-        v.trim()
-            .parse()
-            .unwrap_or_else(|_| panic!("{name}={v}: expected a whole number"))
-    })
 }
 
 #[test]

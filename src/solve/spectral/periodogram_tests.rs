@@ -122,6 +122,14 @@ fn the_grid_fft_is_the_direct_dft_on_gapped_repeated_taus() {
     }
 }
 
+/// The 0° fringes' axis on a unit screen.
+const U_AXIS: Axis = Axis {
+    a: 1.0,
+    b: 0.0,
+    c: 0.0,
+    stretch: 1.0,
+};
+
 #[test]
 fn taus_off_any_grid_take_the_direct_dft() {
     let frames = (1..=64)
@@ -131,13 +139,7 @@ fn taus_off_any_grid_take_the_direct_dft() {
             dir: 0,
         })
         .collect();
-    let axis = Axis {
-        a: 1.0,
-        b: 0.0,
-        c: 0.0,
-        stretch: 1.0,
-    };
-    let design = Design::new(frames, vec![axis], vec![0.0]);
+    let design = Design::new(frames, vec![U_AXIS], vec![0.0]);
     let plans = SpectrumPlans::new(&design);
     assert!(matches!(plans.dirs[0].plan, Plan::Direct { .. }));
 }
@@ -163,13 +165,7 @@ fn every_frame_at_its_own_phase_is_turned_back_by_it() {
             dir: 0,
         })
         .collect();
-    let axis = Axis {
-        a: 1.0,
-        b: 0.0,
-        c: 0.0,
-        stretch: 1.0,
-    };
-    let design = Design::new(frames, vec![axis], vec![0.0]);
+    let design = Design::new(frames, vec![U_AXIS], vec![0.0]);
     let fft = SpectrumPlans::with_fft(&design, true);
     let direct = SpectrumPlans::with_fft(&design, false);
     assert!(matches!(fft.dirs[0].plan, Plan::Grid { .. }));
