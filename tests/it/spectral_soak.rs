@@ -14,6 +14,8 @@
 //! - `MFD_SPECTRAL_SOAK=n`: draw `n` schedules (default 8, about a minute
 //!   on 2 cores in the test profile).
 //! - `MFD_SPECTRAL_SOAK_SEED=s`: run seed `s` alone.
+//! - `MFD_SPECTRAL_SOAK_DUMP=1`: print every pixel with a point beyond
+//!   5 σ of the truth.
 //! - Failing seeds, with their draw, are appended to
 //!   `target/spectral-soak-failures.txt` under the crate.
 
@@ -28,6 +30,9 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use crate::common::env_u64;
 use crate::common::spectral::*;
+use errors::{dump_far, error_over_sigma, tail, FAR_Z};
+
+mod errors;
 
 /// Seeds of the default run start here.
 const FIRST_SEED: u64 = 39_000;
@@ -215,6 +220,9 @@ struct Judged {
     found: [[(usize, usize); 2]; 2],
     /// Series, statistics: RMS error over σ and coordinates.
     z: [(f64, usize); 2],
+    /// Series, statistics: coordinates beyond [`FAR_Z`] σ, and the RMS of
+    /// those within (tells a few far points from σ too small everywhere).
+    tails: [(usize, f64); 2],
     /// Flags set on one engine's pixel and not the other's, with counts.
     flag_diffs: Vec<(u32, usize)>,
     problems: Vec<String>,
@@ -247,6 +255,11 @@ fn judge(d: &Draw) -> Judged {
     } = agreement(&series.maps, &stats.maps);
     let found = [score(&series), score(&stats)].map(|s| s.map(|(_, _, _, n, m)| (n, m)));
     let z = [error_over_sigma(&series), error_over_sigma(&stats)];
+    let tails = [tail(&series), tail(&stats)];
+    if std::env::var_os("MFD_SPECTRAL_SOAK_DUMP").is_some() {
+        dump_far(&series, "series");
+        dump_far(&stats, "statistics");
+    }
     let pixels = series.maps.pixels.len();
     let mut problems = Vec::new();
     if worst > SAME_POINT_SIGMAS {
@@ -284,6 +297,7 @@ fn judge(d: &Draw) -> Judged {
         gained,
         found,
         z,
+        tails,
         flag_diffs,
         problems,
     }
@@ -360,23 +374,6 @@ fn agreement(a: &SpectralMaps, b: &SpectralMaps) -> Agreement {
     out
 }
 
-/// RMS of error over reported σ, both coordinates of both reflections
-/// found, and how many.
-fn error_over_sigma(r: &Run) -> (f64, usize) {
-    let mut z2 = Vec::new();
-    for (q, px) in r.view.pixels.iter().enumerate() {
-        let p = &r.maps.pixels[q];
-        for (k, truth) in [px.front, px.back].into_iter().enumerate() {
-            if let (Ok(t), false) = (truth, p.s[k][0].is_nan()) {
-                z2.push(((p.s[k][0] - t.u) / p.std[k][0]).powi(2));
-                z2.push(((p.s[k][1] - t.v) / p.std[k][1]).powi(2));
-            }
-        }
-    }
-    let n = z2.len();
-    ((z2.iter().sum::<f64>() / n.max(1) as f64).sqrt(), n)
-}
-
 #[test]
 fn random_schedules_give_the_series_answers_from_the_statistics() {
     let seeds: Vec<u64> = match env_u64("MFD_SPECTRAL_SOAK_SEED") {
@@ -409,6 +406,7 @@ fn random_schedules_give_the_series_answers_from_the_statistics() {
                     gained: 0,
                     found: [[(0, 0); 2]; 2],
                     z: [(f64::NAN, 0); 2],
+                    tails: [(0, f64::NAN); 2],
                     flag_diffs: Vec::new(),
                     problems: vec![format!("panicked: {why}")],
                 }
@@ -421,7 +419,8 @@ fn random_schedules_give_the_series_answers_from_the_statistics() {
             "seed {seed}: {} frames, {} directions; {} points compared, worst {:.2e} σ, \
              {} of {} pixels flagged otherwise, with points from the series alone {}, \
              the statistics alone {}; found S1 {:?} / {:?}, S2 {:?} / {:?} \
-             (series / statistics); error/σ {:.3} over {} / {:.3} over {}; flags differing {:?}; {:.1} s",
+             (series / statistics); error/σ {:.3} over {} / {:.3} over {} (beyond {FAR_Z} σ {} / {}, \
+             the rest {:.3} / {:.3}); flags differing {:?}; {:.1} s",
             patterns(&d).len(),
             d.directions.len(),
             j.compared,
@@ -438,6 +437,10 @@ fn random_schedules_give_the_series_answers_from_the_statistics() {
             j.z[0].1,
             j.z[1].0,
             j.z[1].1,
+            j.tails[0].0,
+            j.tails[1].0,
+            j.tails[0].1,
+            j.tails[1].1,
             j.flag_diffs,
             t.elapsed().as_secs_f64()
         );
