@@ -16,7 +16,6 @@ use super::{PixelFlags, PixelResult};
 use crate::optics::trace::PixelPaths;
 
 mod finalize;
-mod mirror;
 mod warm;
 
 use finalize::finalize;
@@ -276,7 +275,6 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
     let d12 = offset(ctx.prior, 0, 1).or(ctx.borrowed_offset);
     let warm = seed.and_then(|s| warm_fits(ctx, data, s));
     let reuse = seed.filter(|_| warm.is_some()).and_then(|s| s.unit_sd);
-    let carried = seed.filter(|_| warm.is_some()).and_then(|s| s.mirror);
     let (one, two, three) = match warm {
         Some((two, z2)) => {
             let n = data.count() as f64;
@@ -287,13 +285,6 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             Some((one, two, three)) => (Some(one), two, three),
             None => return None,
         },
-    };
-    let (two, ambiguous, mirror) = match two {
-        Some(t) => {
-            let (t, a, m) = mirror::weighed(ctx, data, t, carried);
-            (Some(t), a, m)
-        }
-        None => (None, false, None),
     };
     let merged = merged_signal(one.as_ref(), two.as_ref());
     let n = data.count();
@@ -308,30 +299,17 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
         .fold(0.0, f64::max);
     let carried = reused_unit_sd(reuse, d12, &merged, worst, &unit_sd);
     let base = out.base();
-    // The pair as found, which seeds the next pixel even where it is not
-    // reported for its mirrored pairing: the row's smooth start holds.
-    let mut found = None;
     for (k, cand) in [one, two, three].into_iter().enumerate() {
-        let scored = cand.map(|c| {
-            let mut result = finalize(ctx, &c, data, d12, &merged, &unit_sd, base);
-            if k == 1 {
-                found = Some(result);
-                if ambiguous && result.s[1][0].is_finite() {
-                    // Its mirrored pairing fits about as well (`mirror`).
-                    result = PixelResult {
-                        flags: result.flags | PixelFlags::UNRESOLVED,
-                        separation_bins: result.separation_bins,
-                        ..base
-                    };
-                }
-            }
-            Scored { result, bic: c.bic }
+        let scored = cand.map(|c| Scored {
+            result: finalize(ctx, &c, data, d12, &merged, &unit_sd, base),
+            bic: c.bic,
         });
         out.set_model(k, scored);
     }
     let unit_sd = carried.or_else(|| unit_sd.get().map(|&v| (v, merged.amp[0], 0)));
-    // Seed the next pixel only from a pair found, front first.
-    found.and_then(|r| next?.handed_on(&r, unit_sd, mirror))
+    // Seed the next pixel only from a pair found and reported, front first.
+    out.model(1)
+        .and_then(|two| next?.handed_on(&two.result, unit_sd))
 }
 
 /// Of the μ that direction `d`'s periodogram cannot tell from the peak at

@@ -22,9 +22,6 @@ pub struct Seed {
     /// The last separability σ at unit noise computed along the row, the
     /// merged amplitude it was computed at, and pixels since.
     pub(super) unit_sd: Option<(f64, f64, u32)>,
-    /// The row's last test of the pair's other maxima
-    /// ([`super::mirror::Carried`]).
-    pub(super) mirror: super::mirror::Carried,
 }
 
 impl Seed {
@@ -41,22 +38,19 @@ impl Seed {
             back: [b.u, b.v],
             sigma2: two.sigma2(n),
             unit_sd: None,
-            mirror: None,
         })
     }
 
     /// This seed for the next pixel once the pair is reported as `r`
-    /// (front first) with the row's separability σ `unit_sd` and test of
-    /// other maxima `mirror`; `None` unless both points were found.
+    /// (front first) with the row's separability σ `unit_sd`; `None` unless
+    /// both points were found.
     pub(super) fn handed_on(
         mut self,
         r: &PixelResult,
         unit_sd: Option<(f64, f64, u32)>,
-        mirror: super::mirror::Carried,
     ) -> Option<Seed> {
         (r.model == 2 && r.s[1][0].is_finite()).then_some(())?;
         self.unit_sd = unit_sd;
-        self.mirror = mirror;
         let p = self.two;
         let front_first = (p.uv[0][0] - r.s[0][0]).hypot(p.uv[0][1] - r.s[0][1])
             <= (p.uv[1][0] - r.s[0][0]).hypot(p.uv[1][1] - r.s[0][1]);
