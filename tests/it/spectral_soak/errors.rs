@@ -18,8 +18,9 @@ pub fn error_over_sigma(r: &Run) -> (f64, usize) {
 /// Coordinates beyond [`FAR_Z`], and the RMS error over σ of the rest.
 pub fn tail(r: &Run) -> (usize, f64) {
     let z2 = z_squares(r);
+    let all = z2.len();
     let near: Vec<f64> = z2.into_iter().filter(|&z| z <= FAR_Z * FAR_Z).collect();
-    let far = error_over_sigma(r).1 - near.len();
+    let far = all - near.len();
     (
         far,
         (near.iter().sum::<f64>() / near.len().max(1) as f64).sqrt(),
