@@ -16,6 +16,9 @@ use rustfft::{Fft, FftPlanner};
 
 use super::model::Design;
 
+mod aliases;
+pub use aliases::{Aliases, ALIAS_SHARE};
+
 /// Zero-padding factor of the FFT (peak positions to 1/4 bin before the
 /// parabolic refinement).
 const PAD: usize = 4;
@@ -90,6 +93,7 @@ struct DirPlan {
     window: Vec<f64>,
     rot: Vec<Complex<f64>>,
     plan: Plan,
+    aliases: Option<Aliases>,
 }
 
 /// A direction's frames for its periodogram, and whether each must be
@@ -222,11 +226,17 @@ impl SpectrumPlans {
                 let mu_grid = (0..mu_count).map(|k| k as f64 * step).collect();
                 Plan::Direct { taus, mu_grid }
             };
+            let phases: Vec<f64> = idx
+                .iter()
+                .map(|&i| design.frames[i as usize].phase_cycles)
+                .collect();
+            let aliases = aliases::aliases(&plan, &window, &rot, &phases, span);
             dirs.push(DirPlan {
                 idx,
                 window,
                 rot,
                 plan,
+                aliases,
             });
         }
         SpectrumPlans { dirs, bin }
@@ -237,15 +247,11 @@ impl SpectrumPlans {
         self.bin[d]
     }
 
-    /// The period in μ with which direction `d`'s periodogram repeats: `1/Δ`
-    /// for τ on a grid of step Δ (with or without gaps and repeats), where
-    /// a fringe at μ shows at `±μ + k/Δ` as strongly as at μ; `None` for τ
-    /// off any grid, whose near-repeats are weaker than the peak.
-    pub fn alias_period(&self, d: usize) -> Option<f64> {
-        match &self.dirs[d].plan {
-            Plan::Uniform { dtau, .. } | Plan::Grid { dtau, .. } => Some(1.0 / dtau),
-            Plan::Direct { .. } => None,
-        }
+    /// The μ that direction `d`'s periodogram cannot tell from a peak
+    /// (its copies on a τ grid, [`Aliases`]); `None` for τ off any grid,
+    /// whose near-repeats are weaker than the peak.
+    pub fn aliases(&self, d: usize) -> Option<&Aliases> {
+        self.dirs[d].aliases.as_ref()
     }
 
     /// Strongest peak of direction `d`'s periodogram in `μ ∈ [3 bins, 1.05]`:
@@ -264,6 +270,7 @@ impl SpectrumPlans {
             window,
             rot,
             plan,
+            ..
         } = &self.dirs[d];
         let vals: Vec<f64> = idx.iter().map(|&i| y[i as usize]).collect();
         let good: Vec<f64> = vals.iter().copied().filter(|v| v.is_finite()).collect();

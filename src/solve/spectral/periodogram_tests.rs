@@ -199,3 +199,79 @@ fn every_frame_at_its_own_phase_is_turned_back_by_it() {
         "the bin is the whole span's"
     );
 }
+
+/// A coarse grid (Δ = 0.8) whose frames alternate between phases 0 and
+/// ¼ cycle, with a gap of 31 grid points (odd: the alternation flips
+/// after it). The periodogram takes the phase-0 frames: every other grid
+/// point before the gap, the other ones after, so it repeats nearly at
+/// `1/(2Δ)` as well as at `1/Δ`. Every strong local maximum of a noise-free
+/// fringe's periodogram must be one of the copies [`super::Aliases`] lists,
+/// and every copy listed must be strong there.
+#[test]
+fn the_copies_listed_are_the_periodograms_strong_maxima() {
+    let dtau = 0.8;
+    let frames: Vec<FrameMeta> = (0..240u32)
+        .filter(|k| !(90..121).contains(k))
+        .enumerate()
+        .map(|(n, k)| FrameMeta {
+            tau: 1.0 + dtau * f64::from(k),
+            phase_cycles: if n % 2 == 0 { 0.0 } else { 0.25 },
+            dir: 0,
+        })
+        .collect();
+    let design = Design::new(frames, vec![U_AXIS], vec![0.0]);
+    let plans = SpectrumPlans::new(&design);
+    let aliases = plans.aliases(0).expect("τ on a grid").clone();
+    assert!((aliases.period - 1.0 / dtau).abs() < 1e-9);
+    let bin = plans.bin(0);
+    for mu in [0.11, 0.23, 0.47] {
+        let y: Vec<f64> = design
+            .frames
+            .iter()
+            .map(|f| 1000.0 + 400.0 * (std::f64::consts::TAU * (mu * f.tau + f.phase_cycles)).cos())
+            .collect();
+        let (mus, power) = plans.spectrum(0, &y).unwrap();
+        let top = power.iter().copied().fold(0.0, f64::max);
+        let listed = aliases.of(mu, 0.0, 1.05);
+        // The copy the old rule (±μ + k/Δ) missed: half a period away.
+        // The frames before the gap and after it add there with opposite
+        // signs, so it is split into two lobes about a bin either side.
+        let half = 0.5 / dtau;
+        assert!(
+            [half - mu, half + mu]
+                .iter()
+                .filter(|c| (0.0..=1.05).contains(*c))
+                .all(|c| listed.iter().any(|&m| (m - c).abs() < 2.0 * bin)),
+            "μ {mu}: no copy at 1/(2Δ) ± μ in {listed:?}"
+        );
+        // Strong maxima (a quarter of the peak's power: the listing's
+        // ALIAS_SHARE in amplitude, less the other term's interference)
+        // are listed, to a bin.
+        for j in 1..power.len() - 1 {
+            let strong =
+                power[j] >= 0.3 * top && power[j] >= power[j - 1] && power[j] > power[j + 1];
+            if strong && mus[j] > 3.0 * bin {
+                assert!(
+                    listed.iter().any(|&m| (m - mus[j]).abs() < bin),
+                    "μ {mu}: a maximum at {} ({:.2} of the peak) is not listed in {listed:?}",
+                    mus[j],
+                    power[j] / top
+                );
+            }
+        }
+        // And each listed copy on the search's range is strong there.
+        for &m in listed.iter().filter(|&&m| m > 3.0 * bin && m < 1.0) {
+            let near = mus
+                .iter()
+                .zip(&power)
+                .filter(|(x, _)| (*x - m).abs() < bin)
+                .map(|(_, p)| *p)
+                .fold(0.0, f64::max);
+            assert!(
+                near >= 0.15 * top,
+                "μ {mu}: listed copy {m} holds {:.3} of the peak",
+                near / top
+            );
+        }
+    }
+}

@@ -313,15 +313,15 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
 }
 
 /// Of the μ that direction `d`'s periodogram cannot tell from the peak at
-/// `mu` (`±mu + k/Δ` on a τ grid of step Δ:
-/// [`SpectrumPlans::alias_period`]), the one nearest the station's
-/// prediction for the pixel (its two points' midpoint). A direction whose
-/// τ step is coarse (Δ above ½: more than one alias within μ ∈ [0, 1.05])
-/// shows a fringe as strongly at its aliases as where it is, and the
-/// strongest of them is a matter of noise and the window; on a finer
-/// grid every alias lies beyond the search and `mu` is kept.
+/// `mu` (its copies on a τ grid, [`crate::solve::spectral::periodogram::Aliases`]:
+/// `±mu + k/Δ` with one phase throughout, and the copies that alternating
+/// phases and gaps add), the one nearest the station's prediction for the
+/// pixel (its two points' midpoint). A direction whose τ step is coarse
+/// shows a fringe as strongly at its copies as where it is, and the
+/// strongest of them is a matter of noise and the window; on a fine grid
+/// with one phase every copy lies beyond the search and `mu` is kept.
 fn nearest_alias(ctx: &PixelContext, d: usize, mu: f64) -> f64 {
-    let (Some(period), Ok(f)) = (ctx.plans.alias_period(d), ctx.prior.front) else {
+    let (Some(aliases), Ok(f)) = (ctx.plans.aliases(d), ctx.prior.front) else {
         return mu;
     };
     let ax = ctx.design.axes[d];
@@ -329,16 +329,14 @@ fn nearest_alias(ctx: &PixelContext, d: usize, mu: f64) -> f64 {
         Ok(b) => 0.5 * (ax.s(f.u, f.v) + ax.s(b.u, b.v)),
         Err(_) => ax.s(f.u, f.v),
     };
-    if !(period.is_finite() && period > 0.0 && mu.is_finite()) {
+    if !(predicted.is_finite() && mu.is_finite()) {
         return mu;
     }
     // The fringe coordinate runs over [0, 1] across the screen (the
-    // search's 1.05 beyond it): aliases outside are no screen point.
-    [mu, -mu]
+    // search's 1.05 beyond it): copies outside are no screen point.
+    aliases
+        .of(mu, 0.0, 1.05)
         .into_iter()
-        .map(|m| m + ((predicted - m) / period).round() * period)
-        .filter(|m| (0.0..=1.05).contains(m))
-        .chain([mu])
         .min_by(|a, b| (a - predicted).abs().total_cmp(&(b - predicted).abs()))
         .unwrap_or(mu)
 }
