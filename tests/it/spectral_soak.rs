@@ -257,6 +257,11 @@ fn judge(d: &Draw) -> Judged {
     let z = [error_over_sigma(&series), error_over_sigma(&stats)];
     let tails = [tail(&series), tail(&stats)];
     if std::env::var_os("MFD_SPECTRAL_SOAK_DUMP").is_some() {
+        let mut hist = std::collections::BTreeMap::new();
+        for p in &series.maps.pixels {
+            *hist.entry(p.flags.bits()).or_insert(0usize) += 1;
+        }
+        eprintln!("{d:?}\nseries flags (bits: pixels): {hist:?}");
         dump_far(&series, "series");
         dump_far(&stats, "statistics");
     }

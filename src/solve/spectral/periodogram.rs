@@ -17,7 +17,7 @@ use rustfft::{Fft, FftPlanner};
 use super::model::Design;
 
 mod aliases;
-pub use aliases::{Aliases, ALIAS_SHARE};
+pub use aliases::{Aliases, ALIAS_SHARE, NEAR_BINS, NEAR_SHARE};
 
 /// Zero-padding factor of the FFT (peak positions to 1/4 bin before the
 /// parabolic refinement).

@@ -74,6 +74,11 @@ fn start(k: usize, uv: &[[f64; 2]], kappa: Falloff) -> Params {
 /// the direction, t ∈ [−1.25, 0.25], and keep the best linear fit with
 /// positive amplitudes on that direction's frames alone. Directions are
 /// scanned apart because each one's peak is biased along its own axis.
+/// Where the direction's window has strong sidelobes near its peak (a τ
+/// grid with a gap: [`crate::solve::spectral::periodogram::Aliases::near`]),
+/// the peak may be a sidelobe's, and the scan is repeated about `μ_d − δ`
+/// for each of them: the fringes' own place fits that direction's frames
+/// best.
 fn pair_start<S: Samples + ?Sized>(
     ctx: &PixelContext,
     data: &S,
@@ -88,18 +93,21 @@ fn pair_start<S: Samples + ?Sized>(
         // A screen point whose coordinate on this axis is μ (the other is free).
         let point = |mu: f64| [(mu - ax.c) * ax.a / norm2, (mu - ax.c) * ax.b / norm2];
         let mut best = (f64::INFINITY, [mus[dir], mus[dir] + delta]);
-        let scan = data.pair_scan(
-            dir,
-            [mus[dir] - 1.25 * delta, 0.125 * delta, delta],
-            13,
-            kappa,
-            &point,
-        );
-        for (k, (amp, rss)) in scan.into_iter().enumerate() {
-            let t = -1.25 + 0.125 * k as f64;
-            let m = [mus[dir] + t * delta, mus[dir] + (t + 1.0) * delta];
-            if amp[0] > 0.0 && amp[1] > 0.0 && rss < best.0 {
-                best = (rss, m);
+        let near = ctx.plans.aliases(dir).map_or(&[][..], |a| &a.near[..]);
+        for centre in std::iter::once(mus[dir]).chain(near.iter().map(|d| mus[dir] - d)) {
+            let scan = data.pair_scan(
+                dir,
+                [centre - 1.25 * delta, 0.125 * delta, delta],
+                13,
+                kappa,
+                &point,
+            );
+            for (k, (amp, rss)) in scan.into_iter().enumerate() {
+                let t = -1.25 + 0.125 * k as f64;
+                let m = [centre + t * delta, centre + (t + 1.0) * delta];
+                if amp[0] > 0.0 && amp[1] > 0.0 && rss < best.0 {
+                    best = (rss, m);
+                }
             }
         }
         pair_mu[dir] = best.1;

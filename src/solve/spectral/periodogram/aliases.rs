@@ -32,6 +32,20 @@ use super::Plan;
 /// a third: neither is counted.
 pub const ALIAS_SHARE: f64 = 0.5;
 
+/// A sidelobe of the window this near its peak ([`NEAR_BINS`]) and at
+/// least this share of it (in amplitude) is a place the periodogram's
+/// peak may sit instead of the fringe: the pair's two fringes, a bin or
+/// so apart, add their lobes there, and a grid with a gap (two blocks of
+/// τ some distance D apart) has sidelobes at `k/D`, about 0.6 of the peak
+/// at two bins where the gap is a quarter to a third of the span. The
+/// pair's start is scanned there too ([`Aliases::near`]).
+pub const NEAR_SHARE: f64 = 0.3;
+
+/// How far from the peak, in bins, [`NEAR_SHARE`]'s sidelobes are sought:
+/// beyond the pair scan's own reach (1¼ pair offsets, about a bin) and a
+/// gap's first few fringes.
+pub const NEAR_BINS: f64 = 8.0;
+
 /// The copies of a direction's periodogram peak, as offsets: the peak at
 /// μ shows as strongly at `μ + shift + k·period` and at
 /// `mirror − μ + k·period` (every integer k).
@@ -43,6 +57,10 @@ pub struct Aliases {
     pub shifts: Vec<f64>,
     /// `σ ∈ [0, period)` of `M`'s copies.
     pub mirrors: Vec<f64>,
+    /// The window's strong sidelobes near its peak ([`NEAR_SHARE`],
+    /// [`NEAR_BINS`]), as signed offsets δ: a peak at μ may belong to a
+    /// fringe at `μ − δ`.
+    pub near: Vec<f64>,
 }
 
 impl Aliases {
@@ -104,10 +122,18 @@ pub fn aliases(
         .into_iter()
         .map(|j| j * step)
         .collect();
+    let reach = NEAR_BINS / span.max(1e-12);
+    let near = maxima(&wp, NEAR_SHARE * peak)
+        .into_iter()
+        .map(|j| j * step)
+        .flat_map(|d| [d, d - period])
+        .filter(|d| d.abs() > 0.5 * step && d.abs() <= reach)
+        .collect();
     Some(Aliases {
         period,
         shifts,
         mirrors,
+        near,
     })
 }
 
