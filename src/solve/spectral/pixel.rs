@@ -294,7 +294,7 @@ pub fn fit_samples_seeded<S: Samples + ?Sized>(
             None => return None,
         },
     };
-    let merged = merged_signal(one.as_ref(), two.as_ref());
+    let merged = merged_signal(ctx, data, one.as_ref(), two.as_ref());
     let n = data.count();
     let next = two
         .as_ref()
@@ -349,25 +349,58 @@ fn nearest_alias(ctx: &PixelContext, d: usize, mu: f64) -> f64 {
         .unwrap_or(mu)
 }
 
-/// The pixel's signal as one reflection: the one-reflection fit, or on a
-/// warm pixel the pair's amplitude-weighted centre and total amplitude.
-fn merged_signal(one: Option<&Candidate>, two: Option<&Candidate>) -> Params {
-    match (one, two) {
-        (Some(one), _) => one.fit.params,
-        (None, Some(two)) => {
-            let p = two.fit.params;
-            let b = p.amp[0] + p.amp[1];
-            let mut m = start(1, &[[0.0; 2]], p.kappa);
-            m.offset = p.offset;
-            m.amp[0] = b;
-            for c in 0..2 {
-                m.uv[0][c] = (p.amp[0] * p.uv[0][c] + p.amp[1] * p.uv[1][c]) / b;
+/// The pixel's signal as one reflection, which judges whether the expected
+/// pair is separable: the one-reflection fit, or the pair's
+/// amplitude-weighted centre, total amplitude and falloff where the pair
+/// was fitted (in the band, both amplitudes positive) and the
+/// one-reflection fit took its beat for falloff ([`BEAT_KAPPA`]; on a warm
+/// pixel, which fits only the pair, always the pair).
+fn merged_signal<S: Samples + ?Sized>(
+    ctx: &PixelContext,
+    data: &S,
+    one: Option<&Candidate>,
+    two: Option<&Candidate>,
+) -> Params {
+    let pair = match (one, two) {
+        (Some(one), Some(two)) => {
+            let (o, p) = (&one.fit.params, &two.fit.params);
+            let beat = o.amp[0] <= 0.0
+                || (0..p.kappa.groups)
+                    .any(|g| o.kappa[g] - p.kappa[g] > BEAT_KAPPA * ctx.kappa0[g]);
+            if !(beat
+                && p.amp[0] > 0.0
+                && p.amp[1] > 0.0
+                && p.kappa.values().iter().all(|k| k.is_finite())
+                && data.within_band(p))
+            {
+                return *o;
             }
-            m
+            *p
         }
+        (Some(one), None) => return one.fit.params,
+        (None, Some(two)) => two.fit.params,
         (None, None) => unreachable!("a warm pixel has its pair"),
+    };
+    let b = pair.amp[0] + pair.amp[1];
+    let mut m = start(1, &[[0.0; 2]], pair.kappa);
+    m.offset = pair.offset;
+    m.amp[0] = b;
+    for c in 0..2 {
+        m.uv[0][c] = (pair.amp[0] * pair.uv[0][c] + pair.amp[1] * pair.uv[1][c]) / b;
     }
+    m
 }
+
+/// The one-reflection fit's falloff κ exceeding the pair's by this many
+/// times κ0 = 1/τ_max² (its envelope at τ_max under e⁻² ≈ 0.14 of the
+/// pair's) is the beat of a pair about a bin apart taken for falloff, not
+/// the pixel's (soak seed 39058: κ 0.0017–0.0069 against the pair's 4·10⁻⁵,
+/// κ0 7·10⁻⁵; or a negative amplitude). Judged at that κ the expected σ
+/// came out 2–20× its neighbours' and resolved pairs were withheld. Judged
+/// on the pair wherever the pair was the better fit, spurious pairs of
+/// thin plates passed (seed 39041: 20 σ off) and a 13.8 mm plate's back
+/// came out 2× its reported error (wedge soak 36048).
+const BEAT_KAPPA: f64 = 2.0;
 
 /// The expected pair's separation σ at unit noise is the same for every
 /// model (it is built on `merged`), so computed once (into `unit_sd`). A
@@ -387,8 +420,12 @@ fn reused_unit_sd(
     let (Some((sd0, amp0, age)), Some(d)) = (reuse, d12) else {
         return None;
     };
+    // Both amplitudes positive: carried over a sign change, σ came out
+    // negative and the resolution test fell to the fit's own σ alone.
     let approx = sd0 * amp0 / merged.amp[0];
     if age < UNIT_SD_REUSE
+        && amp0 > 0.0
+        && merged.amp[0] > 0.0
         && approx.is_finite()
         && 2.0 * RESOLVE_SIGMAS * approx * worst_sigma2.sqrt() < d[0].hypot(d[1])
     {

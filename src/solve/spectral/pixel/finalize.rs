@@ -101,7 +101,7 @@ fn label_one(
     // back reflection of the expected strength at the expected offset
     // would have been resolved is its absence real (AR-coated back).
     out.separation_bins = separation_bins(ctx, &d);
-    // Here p is `merged` itself (the one-reflection fit).
+    // The expected pair judged on the merged signal ([`super::merged_signal`]).
     let sd = expected_sd(&d, fit.sigma2);
     if RESOLVE_SIGMAS * sd > d[0].hypot(d[1]) {
         out.flags |= PixelFlags::UNRESOLVED;

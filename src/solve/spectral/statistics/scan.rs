@@ -6,6 +6,10 @@ use super::{C64, GRID_BINS};
 use crate::kernels::{exp_fast, sincos_cycles};
 use crate::solve::spectral::periodogram::refine_peak;
 
+/// The band's strongest local maxima besides the peak tried for a second
+/// sinusoid in [`StatisticsSamples::noise_variance`].
+const SECOND_MAXIMA: usize = 4;
+
 impl StatisticsSamples<'_> {
     /// The strongest periodogram peak of direction `d` within the band,
     /// refined, with its power over the noise's median ([`Samples::peak`](crate::solve::spectral::model::Samples::peak)).
@@ -44,15 +48,13 @@ impl StatisticsSamples<'_> {
         // σ² Σ w², median ln 2 of that: the ratio is on the scale of
         // [`super::pixel::DETECTION_RATIO`], which the series engine holds
         // against the periodogram's median over the whole spectrum, the
-        // noise's. σ² is the residual variance of the peak's own sinusoid
-        // (two quadratures and the background), not the series' variance:
-        // that holds the signal too, and capped the ratio at ≈ n/2 times
-        // the falloff's share whatever the noise (a direction of 180
+        // noise's. σ² is the residual variance after the band's signal
+        // (the background and the peak's sinusoid, with a second one where
+        // that leaves less: [`Self::noise_variance`]), not the series'
+        // variance: that holds the signal too, and capped the ratio at ≈ n/2
+        // times the falloff's share whatever the noise (a direction of 180
         // frames never reached 30: issue 39).
-        let var = self
-            .noise_variance(d, mus[k])
-            .unwrap_or(var)
-            .max(1.0 / 12.0);
+        let var = self.noise_variance(d, &mus, &power, k).unwrap_or(var);
         let ratio = power[k] / (std::f64::consts::LN_2 * var * t.w2);
         if k == 0 || k + 1 == power.len() {
             // The strongest power is at the band's edge: the signal may lie
@@ -63,36 +65,116 @@ impl StatisticsSamples<'_> {
         Some((mu, ratio))
     }
 
+    /// The noise the periodogram's peak `k` (of `power` at `mus`) is held
+    /// against: the residual variance of direction `d`'s samples after the
+    /// least-squares background and a sinusoid of free phase at the peak,
+    /// or, where it leaves less, after a second one too, at the band's next
+    /// strongest maxima or half and one bin beside the peak (and then a
+    /// third among the same). A pair in the
+    /// band leaves its second reflection (or the beat of a pair merged in
+    /// one peak) in one sinusoid's residual, which then holds signal, not
+    /// noise: with a gap in the τ grid that pushed pixels whose pair the
+    /// series finds below detection (spectral soak, seed 39058: 259 of 1033
+    /// pixels). On pure noise the second sinusoid takes two of the n
+    /// degrees of freedom and one noise peak, a few percent of σ² at most,
+    /// far inside detection's margin (a noise peak sits ~10× the median
+    /// power, detection at 30×). Never below the counts' rounding, 1/12
+    /// count².
+    fn noise_variance(&self, d: usize, mus: &[f64], power: &[f64], k: usize) -> Option<f64> {
+        let one = self.residual_variance(d, &[mus[k]])?;
+        // Candidates at least half a bin (two grid steps, ¼ bin each) from
+        // the peak: the band's strongest local maxima, and the peak's sides.
+        let mut maxima: Vec<usize> = (1..power.len().saturating_sub(1))
+            .filter(|&i| i.abs_diff(k) >= 2 && power[i] >= power[i - 1] && power[i] >= power[i + 1])
+            .collect();
+        maxima.sort_by(|&a, &b| power[b].total_cmp(&power[a]));
+        maxima.truncate(SECOND_MAXIMA);
+        let sides = [k.wrapping_sub(2), k + 2, k.wrapping_sub(4), k + 4];
+        let cands: Vec<usize> = maxima
+            .into_iter()
+            .chain(sides.into_iter().filter(|&i| i < power.len()))
+            .collect();
+        let (best, at) = cands
+            .iter()
+            .filter_map(|&i| Some((self.residual_variance(d, &[mus[k], mus[i]])?, i)))
+            .fold((one, usize::MAX), |a, b| if b.0 < a.0 { b } else { a });
+        // A third where the second helped: a pair's sidelobes in a gapped
+        // grid, or a third reflection.
+        let best = if at == usize::MAX {
+            best
+        } else {
+            cands
+                .iter()
+                .filter(|&&i| i.abs_diff(at) >= 2)
+                .filter_map(|&i| self.residual_variance(d, &[mus[k], mus[at], mus[i]]))
+                .fold(best, f64::min)
+        };
+        Some(best.max(1.0 / 12.0))
+    }
+
     /// The residual variance of direction `d`'s samples after the
-    /// least-squares background and one sinusoid at `mu` with the falloff
-    /// the scans start from (κ0, the κ range's `[−κ0, 16κ0]`) and a free
-    /// phase (two quadratures: the pair scan's columns with the second one
-    /// a quarter cycle from the first): the noise the periodogram's peak is
-    /// held against. `None` with fewer than 4 samples or a singular fit.
-    fn noise_variance(&self, d: usize, mu: f64) -> Option<f64> {
+    /// least-squares background and a sinusoid of free phase (two
+    /// quadratures) at each of `mus`, with the falloff the scans start from
+    /// (κ0, the κ range's `[−κ0, 16κ0]`): `RSS / (n − 1 − 2·len)`. `None`
+    /// without a sample to spare or where the fit is singular.
+    fn residual_variance(&self, d: usize, mus: &[f64]) -> Option<f64> {
         let pd = &self.dirs[d];
         let t = &self.tables.dirs[d];
         let kappa = (-self.tables.kappa_range[0]).max(0.0);
-        let quarter = C64::new(0.0, 1.0);
-        let mut gram: Vec<PairNode> = t
-            .gram
-            .tau
-            .iter()
-            .map(|&tau| {
-                let mut nd = PairNode::new(tau, kappa, [mu - pd.mu_c, 0.0, 0.0]);
-                nd.off = quarter;
-                nd
-            })
-            .collect();
-        // ½Σ M |a0|², the same for the quadrature; Re(a0 ā1) = 0.
-        let m00: f64 = gram
-            .iter()
-            .zip(pd.hm.iter())
-            .map(|(nd, m)| m * nd.cur.norm_sqr())
-            .sum();
-        let sums = self.pair_sums(d, &mut gram, [m00, 0.0]);
-        let (_, rss) = self.pair_fit(d, &sums);
-        (pd.n > 4.0 && rss.is_finite()).then(|| rss / (pd.n - 3.0))
+        let q = t.gram.len();
+        let m = 1 + 2 * mus.len();
+        if pd.n <= m as f64 + 1.0 {
+            return None;
+        }
+        // The columns on the product nodes, each sinusoid's and its
+        // quadrature's (·i).
+        let mut cols: Vec<C64> = Vec::with_capacity((m - 1) * q);
+        for &mu in mus {
+            let first = cols.len();
+            cols.extend(
+                t.gram
+                    .tau
+                    .iter()
+                    .map(|&tau| cis((mu - pd.mu_c) * tau) * exp_fast(-kappa * tau * tau)),
+            );
+            for j in 0..q {
+                let c = cols[first + j];
+                cols.push(C64::new(-c.im, c.re));
+            }
+        }
+        let col = |x: usize| &cols[x * q..(x + 1) * q];
+        let mut g = nalgebra::DMatrix::<f64>::zeros(m, m);
+        let mut h = nalgebra::DVector::<f64>::zeros(m);
+        g[(0, 0)] = pd.n;
+        h[0] = pd.sy;
+        for x in 1..m {
+            let cx = col(x - 1);
+            let (mut e, mut y) = (0.0, 0.0);
+            for (j, c) in cx.iter().enumerate() {
+                e += (C64::new(pd.ez_re[j], pd.ez_im[j]) * c).re;
+                y += (C64::new(pd.zg_re[j], pd.zg_im[j]) * c).re;
+            }
+            g[(0, x)] = e;
+            g[(x, 0)] = e;
+            h[x] = y - self.y0 * e;
+            for z in x..m {
+                // ½Re(M a b̄) + ½Re(D a b), ½M and ½D as the tables hold them.
+                let v: f64 = cx
+                    .iter()
+                    .zip(col(z - 1))
+                    .enumerate()
+                    .map(|(j, (a, b))| {
+                        pd.hm[j] * (a * b.conj()).re
+                            + (C64::new(pd.hd_re[j], pd.hd_im[j]) * a * b).re
+                    })
+                    .sum();
+                g[(x, z)] = v;
+                g[(z, x)] = v;
+            }
+        }
+        let sol = g.cholesky()?.solve(&h);
+        let rss = (pd.syy - h.dot(&sol)).max(0.0);
+        rss.is_finite().then(|| rss / (pd.n - m as f64))
     }
 
     /// The linear fits of `count` front/back pairs along direction `dir`
