@@ -257,7 +257,8 @@ fn portable_paths_match_the_dispatched_ones() {
 /// second reflection of a pair: on a τ grid with a gap (τ 80…112 left
 /// out, as the spectral soak's seed 39058 had), a pair 0.8 bin apart
 /// with the falloff the scan assumes (κ0), and the same pair with twice
-/// the noise. The variance the peak is held against is σ² + X, X what the
+/// the noise (the estimate itself, without the gate that skips it where
+/// it cannot decide detection). The variance is σ² + X, X what the
 /// sinusoids (on the band's ¼-bin grid, not at the pair's frequencies)
 /// leave of the signal: the ratio falls by (4σ² + X)/(σ² + X), above 2.5
 /// exactly when X < σ², the variance mostly noise (measured 2.88 and
@@ -298,7 +299,7 @@ fn the_peak_is_held_against_the_noise_not_the_second_reflection() {
     for d in 0..2 {
         let ratio = |p: usize| {
             let (c, _) = stats.samples(&design, p, Some(4095)).unwrap();
-            c.band_peak(d).unwrap().1
+            c.band_peak_with(d, false).unwrap().1
         };
         let (a, b) = (ratio(0), ratio(1));
         eprintln!(
